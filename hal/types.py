@@ -73,7 +73,9 @@ class RobotInfo:
         try:
             return self._index[name]
         except KeyError:
-            raise HalError(f'joint "{name}" is not a joint of {self.name}: expected one of {list(self.joint_names)}') from None
+            raise HalError(
+                f'joint "{name}" is not a joint of {self.name}: expected one of {list(self.joint_names)}'
+            ) from None
 
     def ft_index(self, sensor: str) -> int:
         """Row of F/T sensor ``sensor`` in :attr:`SensorFrame.wrenches`."""
