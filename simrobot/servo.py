@@ -122,7 +122,7 @@ class Servo:
             return self.tau_motor
         e = q_cmd - q_m
         e = np.sign(e) * np.maximum(np.abs(e) - p.e_deadzone, 0.0)
-        kp = p.kp * (1.0 + p.g_dir * np.sign(dq_m))
+        kp = p.kp * (1.0 + p.g_dir * np.tanh(dq_m / p.v_eps))  # smooth sign: no chatter at rest
         i_cmd = (kp * e - p.kd * dq_m) / p.k_t
         i = np.sign(i_cmd) * np.maximum(np.abs(i_cmd) - p.i_deadzone, 0.0)
         np.clip(i, -p.i_max, p.i_max, out=self.current)
@@ -138,6 +138,16 @@ class Servo:
         asym = p.tau_c_asym * np.abs(s)
         cog = p.cog_amp * np.sin(2.0 * np.pi * q_m / p.cog_period)
         return heat * (p.b * dq_m + coulomb) + asym + cog
+
+    def damping(self, dq_m: np.ndarray) -> np.ndarray:
+        """Slope -d(motor torque - friction)/d(dq) [N m s/rad] at velocity ``dq_m``: the part the
+        simulator integrates implicitly (a stiff servo and a steep Coulomb slope chatter at 1 kHz when
+        integrated explicitly)."""
+        p = self.p
+        active = (np.abs(self.current) > 0.0) & (np.abs(self.current) < p.i_max) & self.enabled
+        sech2 = 1.0 - np.tanh(dq_m / p.v_eps) ** 2
+        coulomb = p.tau_c + p.tau_s * np.exp(-((dq_m / p.v_s) ** 2)) + p.mu_load * np.abs(self.tau_prev)
+        return p.kd * active + (1.0 + p.thermal_alpha * self.temperature) * (p.b + coulomb * sech2 / p.v_eps)
 
     def heat(self) -> None:
         """Advance the winding temperature by one period (dissipated power heats, ambient cools)."""

@@ -112,6 +112,7 @@ class SimRobot:
         self._gyro_adr = m.sensor("imu_gyro").adr[0]
         self._acc_adr = m.sensor("imu_accel").adr[0]
         self._ops = [(op, m.body(op.body).id) for op in sc.operator]
+        self._sole_geoms = (m.geom("right_sole").id, m.geom("left_sole").id)
         self._tau = np.zeros(len(self.joint_names))
         self._ext = np.zeros(6)
         self.seq = 0
@@ -150,6 +151,8 @@ class SimRobot:
         q_m[self._flex], dq_m[self._flex] = self._theta[self._flex], self._omega[self._flex]
         tau_motor = sv.motor_torque(q_cmd, q_m, dq_m)
         self._apply_operator(self.time)
+        rigid = np.ones(len(self.joint_names), dtype=bool)
+        rigid[self._flex] = False
         for _ in range(self.substeps):
             q_link = d.qpos[self._qadr]
             dq_link = d.qvel[self._dadr]
@@ -158,13 +161,17 @@ class SimRobot:
             tau = tau_motor - sv.friction(q_m, dq_m)
             if self._flex.size:
                 tau = self._flex_step(tau, q_link, dq_link)
-            d.qfrc_applied[self._dadr] = tau
-            self._tau = tau
+            # The velocity-dependent part of the servo and friction is integrated implicitly:
+            # MuJoCo applies -D dq_next as joint damping, so D dq is added back here.
+            damp = sv.damping(dq_m) * rigid
+            m.dof_damping[self._dadr] = damp
+            d.qfrc_applied[self._dadr] = tau + damp * dq_link
             # New torque: recompute accelerations only, integrate, then evaluate the new state
             # (sensors included) with the torque held.
             mujoco.mj_forwardSkip(m, d, mujoco.mjtStage.mjSTAGE_VEL, 1)
             self._integrate(m, d)
             mujoco.mj_forward(m, d)
+            self._tau = d.qfrc_applied[self._dadr] - damp * d.qvel[self._dadr]  # what acted on the links
         sv.tau_prev[:] = self._tau
         sv.heat()
         self.seq += 1
@@ -183,6 +190,7 @@ class SimRobot:
             time=self.time, seq=self.seq, q=q, dq=dq, tau=self._tau.copy(), current=self.servo.current.copy(),
             base_position=d.qpos[0:3].copy(), base_quat_wxyz=d.qpos[3:7].copy(),
             base_velocity=d.qvel[0:6].copy(), wrenches=self._true_wrenches(), external_wrench=self._ext.copy(),
+            sole_contact_forces=self._sole_contact_forces(),
         )
 
     def add_push(self, push: OperatorPush) -> None:
@@ -217,6 +225,19 @@ class SimRobot:
                 w = s * np.concatenate([op.force, op.torque])
                 xfrc[body] += w
                 self._ext += w
+
+    def _sole_contact_forces(self) -> np.ndarray:
+        m, d = self.model, self.data
+        out = np.zeros((2, 3))
+        f6 = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            for k, sole in enumerate(self._sole_geoms):
+                if sole in (c.geom1, c.geom2):
+                    mujoco.mj_contactForce(m, d, i, f6)
+                    world = c.frame.reshape(3, 3).T @ f6[:3]  # contact frame -> world: force on geom2
+                    out[k] += world if c.geom2 == sole else -world
+        return out
 
     def _true_wrenches(self) -> np.ndarray:
         sd = self.data.sensordata

@@ -25,10 +25,11 @@ class GroundTruth:
     base_quat_wxyz: np.ndarray  # (4,) waist orientation in world, w first
     base_velocity: np.ndarray  # (6,) [m/s, rad/s] linear (world frame) then angular (waist frame)
     wrenches: np.ndarray  # [N, N m] (4, 6) noise-free, offset-free F/T readings (HAL convention)
-    external_wrench: np.ndarray  # [N, N m] (6,) operator wrench in world frame at its link origin
+    external_wrench: np.ndarray  # [N, N m] (6,) operator wrench, world frame, at the pushed body's CoM
+    sole_contact_forces: np.ndarray  # [N] (2, 3) total contact force on the right and left sole, world frame
 
     FIELDS = ("q", "dq", "tau", "current", "base_position", "base_quat_wxyz", "base_velocity", "wrenches",
-              "external_wrench")
+              "external_wrench", "sole_contact_forces")
 
     def to_vector(self) -> np.ndarray:
         """Flatten the arrays (FIELDS order) into one float64 vector (time and seq excluded)."""
@@ -39,7 +40,7 @@ class GroundTruth:
         """Inverse of :meth:`to_vector` for a robot with ``n_joints`` joints."""
         shapes = {"q": (n_joints,), "dq": (n_joints,), "tau": (n_joints,), "current": (n_joints,),
                   "base_position": (3,), "base_quat_wxyz": (4,), "base_velocity": (6,), "wrenches": (4, 6),
-                  "external_wrench": (6,)}
+                  "external_wrench": (6,), "sole_contact_forces": (2, 3)}
         out, i = {}, 0
         for f in cls.FIELDS:
             size = int(np.prod(shapes[f]))
