@@ -1,0 +1,43 @@
+"""The loss minimised by a fit: plain least squares (eq. 7) or the asymmetric penalty (eq. 8)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from servotau.errors import IdentificationError
+
+from .validation import check_weight
+
+LOSS_KINDS = ("least_squares", "asymmetric")
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Which loss a fit minimises.
+
+    Attributes:
+        kind: ``"least_squares"`` or ``"asymmetric"``.
+        w: Over-estimation weight (> 1) for ``"asymmetric"``, ``None`` for least squares.
+    """
+
+    kind: str = "least_squares"
+    w: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in LOSS_KINDS:
+            raise IdentificationError(f"loss kind = {self.kind!r}: expected one of {list(LOSS_KINDS)}")
+        if self.kind == "asymmetric":
+            object.__setattr__(self, "w", check_weight(self.w))
+        elif self.w is not None:
+            raise IdentificationError(f"w = {self.w!r}: expected None for a least-squares loss")
+
+    @classmethod
+    def least_squares(cls) -> Loss:
+        return cls("least_squares")
+
+    @classmethod
+    def asymmetric(cls, w: float) -> Loss:
+        return cls("asymmetric", w)
+
+    def __str__(self) -> str:
+        return self.kind if self.w is None else f"{self.kind}(w={self.w:g})"
