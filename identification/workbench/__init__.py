@@ -1,0 +1,1 @@
+"""Model workbench: compare the actuator model with measurements, diagnose, add effects."""
