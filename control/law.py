@@ -1,0 +1,84 @@
+"""The complete torque-control law: inverse dynamics (eq. 12) then torque feedback and motor model (eq. 10-11),
+with the command split into the paper's components (eq. 13-14, section 5.5).
+
+With ``b = M ddq + h``, ``tau_m = b_hat - J^T f_hat`` (the model's torque for the estimated motion) and
+``r = tau_hat - tau_m`` (what the estimator's torque adds to the model)::
+
+    K_tau tau* = K_tau (b_d - J^T f_ff)                         ff_torque
+               + K_tau (1 + K_p) K_s e_q                        fb_position      (K6 e_q)
+               + K_tau (1 + K_p) K_d de_q                       fb_velocity      (K7 de_q)
+               + K_tau K_p (b_d - b_hat)                        fb_acceleration  (K8 dde_q)
+               - K_tau (K_p J^T e_f + (1 + K_p) J^T K_f e_f)    fb_force         (K9 e_f)
+               - K_tau K_p r                                    fb_torque_residual
+               + K_tau K_i integral(e_tau)                      fb_integral
+
+which is exact (not an approximation): the components always sum to the command ``dq_err``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import ControlConfig
+from .dynamics import BaseState
+from .inverse_dynamics import InverseDynamics
+from .terms import TORQUE_COMPONENTS, ControlTerms
+from .torque import JointTorqueController
+
+
+class TorqueControlLaw:
+    """Eq. 10-12 for every joint (gains 0 on position-controlled joints), outputs in a :class:`ControlTerms`."""
+
+    def __init__(self, config: ControlConfig, model_path: str, period: float):
+        self.config = config
+        self.inverse_dynamics = InverseDynamics.from_config(config, model_path)
+        self.torque = JointTorqueController.from_config(config, period)
+        tc = self.torque
+        self.k6 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_s  # [-]
+        self.k7 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_d  # [s]
+        self._kt_kp = tc.k_tau * tc.k_p
+        self._kt_1kp = tc.k_tau * (1.0 + tc.k_p)
+        self._tmp = np.zeros(len(config.joint_names))
+
+    def make_terms(self) -> ControlTerms:
+        """The outputs holder this law writes into (it shares the law's own buffers: no copy per tick)."""
+        idc, tc = self.inverse_dynamics, self.torque
+        shared = {"tau_d": idc.tau_d, "e_q": idc.e_q, "de_q": idc.de_q, "dde_q": idc.dde_q, "f_d": idc.f_d,
+                  "f_hat": idc.f_hat, "e_f": idc.e_f, "tau_star": tc.tau_star, "e_tau": tc.e_tau}
+        return ControlTerms(len(self.config.joint_names), shared)
+
+    def reset(self) -> None:
+        """Empty the torque integral (on entering torque mode)."""
+        self.torque.reset()
+
+    def update(self, terms: ControlTerms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, wrenches=None,
+               base: BaseState | None = None) -> np.ndarray:
+        """Compute the law and write every torque component into ``terms`` (from :meth:`make_terms`); return
+        ``dq_err`` (n,) [rad]."""
+        idc, tc, t, tmp = self.inverse_dynamics, self.torque, terms, self._tmp
+        tau_d = idc.update(q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, wrenches, base)
+        dq_err = tc.update(tau_d, tau_hat, dq_hat)
+        np.multiply(tc.k_tau, idc.tau_ff, out=t.ff_torque)
+        np.copyto(t.ff_friction, tc.friction)
+        np.multiply(self.k6, idc.e_q, out=t.fb_position)
+        np.multiply(self.k7, idc.de_q, out=t.fb_velocity)
+        np.subtract(idc.b_d, idc.b_hat, out=tmp)
+        np.multiply(self._kt_kp, tmp, out=t.fb_acceleration)
+        if idc.force is not None:
+            np.multiply(self._kt_kp, idc.jt_ef, out=t.fb_force)
+            np.multiply(self._kt_1kp, idc.jt_kf_ef, out=tmp)
+            t.fb_force += tmp
+            np.negative(t.fb_force, out=t.fb_force)
+        np.subtract(idc.b_hat, idc.jtf_hat, out=tmp)  # tau_m
+        tmp -= tau_hat  # -r
+        np.multiply(self._kt_kp, tmp, out=t.fb_torque_residual)
+        if tc.has_integral:
+            np.multiply(tc.k_tau, tc.integral_term, out=t.fb_integral)
+        np.copyto(t.tau_hat, tau_hat)
+        return dq_err
+
+    @staticmethod
+    def clear(terms: ControlTerms) -> None:
+        """Zero the torque components (outside torque mode)."""
+        for name in TORQUE_COMPONENTS:
+            getattr(terms, name).fill(0.0)

@@ -1,0 +1,254 @@
+"""Control manager: position or torque mode with bumpless switches, safety checks and a latched hold.
+
+Each tick (:meth:`ControlManager.tick`) takes the raw :class:`~servotau.hal.types.SensorFrame`, the estimate
+and the reference, and returns the :class:`~servotau.control.terms.ControlTerms` whose ``q_des`` goes to
+the robot::
+
+    manager = ControlManager.from_toml(info)                # config/control.toml
+    manager.request_mode(Mode.TORQUE)                       # applied at the next tick, bumpless
+    terms = manager.tick(frame, estimate, trajectory.sample(t))
+    robot.step(terms.q_des)
+    if manager.tripped: print(manager.report.message)       # latched until manager.reset()
+
+Modes:
+
+- ``position``: ``q_des = q_ref`` (the native servo; the paper's baseline).
+- ``torque``: ``q_des = q + dq_err`` on torque-controlled joints (eq. 10-12, :mod:`.law`), ``q_ref`` elsewhere.
+  ``q`` is the encoder reading of the frame (not the filtered estimate): the servo sees exactly ``dq_err``.
+- ``hold``: entered by a safety trip; ``q_des`` = the measured angles at the trip. Only :meth:`reset` leaves
+  it (into position mode).
+
+Bumpless switch: on a mode change the offset ``last q_des - new command`` is added to the new command and
+faded to zero over ``fade_time`` with a half-cosine, so the first command of the new mode equals the last
+one of the old mode and the command's slope is continuous. The torque integral starts empty.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+
+import numpy as np
+
+from servotau.errors import ControlError
+from servotau.hal.types import RobotInfo, SensorFrame
+
+from .config import DEFAULT_PATH, ControlConfig
+from .dynamics import BaseState
+from .law import TorqueControlLaw
+from .safety import SafetyMonitor, SafetyReport
+from .terms import ControlTerms
+
+log = logging.getLogger(__name__)
+
+
+class Mode(StrEnum):
+    POSITION = "position"
+    TORQUE = "torque"
+    HOLD = "hold"
+
+
+@dataclass
+class StateEstimate:
+    """Plain-array estimate for :meth:`ControlManager.tick` (the estimator's ``Estimate`` has the same fields).
+
+    Joint arrays (n,) in RobotInfo order; ``wrenches`` (4, 6) compensated external wrenches at the F/T
+    sensors (HAL order, environment on the robot); base fields (3,) in the waist frame (floating base only).
+    """
+
+    q: np.ndarray  # [rad]
+    dq: np.ndarray  # [rad/s]
+    ddq: np.ndarray  # [rad/s^2]
+    tau: np.ndarray  # [N m]
+    wrenches: np.ndarray | None = None  # [N, N m]
+    base_angular_velocity: np.ndarray | None = None  # [rad/s]
+    base_angular_acceleration: np.ndarray | None = None  # [rad/s^2]
+    base_specific_force: np.ndarray | None = None  # [m/s^2]
+    valid: bool = True
+
+
+class ControlManager:
+    """Modes, bumpless switches, safety and the per-tick outputs of the torque controller."""
+
+    def __init__(self, info: RobotInfo, config: ControlConfig, model_path: str | Path | None = None):
+        if tuple(config.joint_names) != tuple(info.joint_names):
+            raise ControlError(f"config joints {list(config.joint_names)}: expected the robot's joints, in order "
+                               f"{list(info.joint_names)}")
+        self.info = info
+        self.config = config
+        n = info.nq
+        self.law = TorqueControlLaw(config, str(model_path or info.model_path), info.period)
+        self.safety = SafetyMonitor(info, config.safety)
+        self.terms = self.law.make_terms()
+        self.torque_mask = config.torque_mask.copy()
+        self._position_mask = (~self.torque_mask).astype(float)
+        self._mode = Mode.POSITION
+        self._requested = Mode.POSITION
+        self._report: SafetyReport | None = None
+        self._offset = np.zeros(n)  # [rad] bumpless-switch offset at the switch
+        self._t_switch = -math.inf
+        self._fading = False
+        self._started = False  # a command was sent (terms.q_des holds the last one)
+        self._q_good = np.clip(np.zeros(n), info.q_min, info.q_max)  # last finite encoder reading
+        self._q_hold = np.zeros(n)
+        self._cmd = np.zeros(n)
+
+    @classmethod
+    def from_toml(cls, info: RobotInfo, path: str | Path = DEFAULT_PATH) -> ControlManager:
+        """Manager for ``info`` with the settings of ``path`` (default ``config/control.toml``)."""
+        return cls(info, ControlConfig.from_toml(path, info))
+
+    # -- state -------------------------------------------------------------------------------------
+    @property
+    def mode(self) -> Mode:
+        """Mode of the last tick."""
+        return self._mode
+
+    @property
+    def tripped(self) -> bool:
+        return self._report is not None
+
+    @property
+    def report(self) -> SafetyReport | None:
+        """Why the controller is holding, or None."""
+        return self._report
+
+    def request_mode(self, mode: Mode | str) -> None:
+        """Switch to ``position`` or ``torque`` at the next tick (bumpless).
+
+        Raises:
+            ControlError: Unknown mode, ``hold`` requested, torque mode without torque-controlled joints, or
+                a latched trip (call :meth:`reset` first).
+        """
+        try:
+            mode = Mode(mode)
+        except ValueError:
+            raise ControlError(f"mode {mode!r}: expected 'position' or 'torque'") from None
+        if mode == Mode.HOLD:
+            raise ControlError("mode 'hold': expected 'position' or 'torque' (hold is entered by a safety trip)")
+        if self._report is not None:
+            raise ControlError(f"cannot switch to {mode.value} mode: {self._report.message}; call reset() first")
+        if mode == Mode.TORQUE and not self.torque_mask.any():
+            raise ControlError(f"torque mode: no torque-controlled joint in {self.config.source}: expected a "
+                               "non-empty torque_joints")
+        self._requested = mode
+
+    def reset(self) -> None:
+        """Clear a latched trip: back to position mode, faded from the held angles."""
+        if self._report is not None:
+            log.warning("safety latch reset (was: %s)", self._report.message)
+        self._report = None
+        self.terms.tripped = False
+        self._requested = Mode.POSITION
+        self.safety.reset()
+
+    def set_force_reference(self, f_d: np.ndarray) -> None:
+        """Desired wrench [N, N m] (6,) of the force task, at the task frame."""
+        self.law.inverse_dynamics.set_force_reference(f_d)
+
+    # -- per tick ----------------------------------------------------------------------------------
+    def tick(self, frame: SensorFrame, estimate, reference) -> ControlTerms:
+        """One control period.
+
+        Args:
+            frame: The raw sensor frame of this tick (encoders give ``q`` of the command).
+            estimate: :class:`StateEstimate` or the estimator's ``Estimate`` (``q, dq, ddq, tau``, ``wrenches``
+                with contacts, base fields with a floating base); None or ``valid == False`` while the
+                estimator fills its windows (position mode only).
+            reference: Desired ``q, dq, ddq`` (n,) [rad, rad/s, rad/s^2], e.g. a ``TrajectoryPoint``.
+
+        Returns:
+            The outputs of this tick (the same object every tick); send ``q_des`` to the robot.
+        """
+        t = self.terms
+        t.time, t.seq = frame.time, frame.seq
+        if self._report is not None:
+            return self._hold(frame)
+        has_estimate = estimate is not None and getattr(estimate, "valid", True)
+        report = self.safety.check_frame(frame)
+        if report is None and has_estimate:
+            report = self.safety.check_estimate(frame, estimate.q, estimate.dq, estimate.ddq, estimate.tau)
+        if report is None and self._requested == Mode.TORQUE and not has_estimate:
+            report = SafetyReport("invalid_estimate", "", math.nan, 0.0, float(frame.time), int(frame.seq))
+        if report is not None:
+            return self._trip(frame, report)
+        q = frame.q
+        np.copyto(self._q_good, q)  # finite: checked above
+        mode = self._requested
+        switching = mode != self._mode
+        if switching and mode == Mode.TORQUE:
+            self.law.reset()
+        dq_err = None
+        if has_estimate:
+            dq_err = self.law.update(t, estimate.q, estimate.dq, estimate.ddq, estimate.tau, reference.q,
+                                     reference.dq, reference.ddq, getattr(estimate, "wrenches", None),
+                                     self._base(estimate))
+        cmd = self._cmd
+        np.subtract(reference.q, q, out=t.position_command)  # q_ref - q
+        if mode == Mode.TORQUE:
+            # cmd = q + dq_err on torque joints, q_ref elsewhere: q + dq_err + position_command (masked)
+            t.position_command *= self._position_mask
+            np.add(q, dq_err, out=cmd)
+            np.add(cmd, t.position_command, out=cmd)
+        else:
+            np.copyto(cmd, reference.q)
+            if has_estimate or switching:
+                self.law.clear(t)  # the torque components are 0 outside torque mode
+        if switching:
+            if self._started:
+                np.subtract(t.q_des, cmd, out=self._offset)  # t.q_des still holds the last command
+                self._fading = True
+            self._t_switch = float(frame.time)
+            log.info("control mode %s -> %s at t = %.3f s", self._mode.value, mode.value, frame.time)
+        if self._fading:
+            w = self._fade(float(frame.time) - self._t_switch)
+            np.multiply(self._offset, w, out=t.switch_offset)
+            self._fading = w > 0.0
+        np.add(cmd, t.switch_offset, out=t.q_des)
+        np.subtract(t.q_des, q, out=t.dq_err)
+        report = self.safety.check_command(frame, t.dq_err)
+        if report is not None:
+            return self._trip(frame, report)
+        self._mode = mode
+        t.mode = mode.value
+        self._started = True
+        return t
+
+    # -- internals ---------------------------------------------------------------------------------
+    def _fade(self, elapsed: float) -> float:
+        """Weight of the switch offset: 1 at the switch, 0 after ``fade_time``, half-cosine in between."""
+        T = self.config.fade_time
+        if elapsed >= T:
+            return 0.0
+        return 0.5 * (1.0 + math.cos(math.pi * max(elapsed, 0.0) / T))
+
+    def _base(self, estimate) -> BaseState | None:
+        if self.config.base != "floating":
+            return None
+        return BaseState(estimate.base_angular_velocity, estimate.base_angular_acceleration,
+                         estimate.base_specific_force)
+
+    def _trip(self, frame: SensorFrame, report: SafetyReport) -> ControlTerms:
+        self._report = report
+        q = frame.q
+        np.copyto(self._q_hold, self._q_good)  # last finite reading
+        np.copyto(self._q_hold, q, where=np.isfinite(q))
+        log.error("%s: holding the measured position", report.message)
+        return self._hold(frame)
+
+    def _hold(self, frame: SensorFrame) -> ControlTerms:
+        t = self.terms
+        self._mode = Mode.HOLD
+        t.mode = Mode.HOLD.value
+        t.tripped = True
+        t.q_des[:] = self._q_hold
+        np.subtract(self._q_hold, frame.q, out=t.dq_err)
+        t.position_command[:] = t.dq_err
+        t.switch_offset.fill(0.0)
+        self._fading = False
+        self.law.clear(t)
+        self._started = True
+        return t

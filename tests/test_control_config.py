@@ -1,0 +1,101 @@
+"""Tests of servotau.control.config: config/control.toml and the validation of every field."""
+
+import copy
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from servotau.config import CONFIG_DIR
+from servotau.control.config import ControlConfig, ForceTask, JointGains, SafetyLimits
+from servotau.errors import ConfigError, ControlError
+from servotau.hal.types import RobotInfo
+from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
+
+INFO = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
+with open(CONFIG_DIR / "control.toml", "rb") as _f:
+    BASE = tomllib.load(_f)
+
+
+def _with(path: str, value):
+    """The shipped config with ``path`` (dotted) set to ``value`` (or removed if value is ...)."""
+    data = copy.deepcopy(BASE)
+    keys = path.split(".")
+    d = data
+    for k in keys[:-1]:
+        d = d.setdefault(k, {})
+    if value is ...:
+        d.pop(keys[-1], None)
+    else:
+        d[keys[-1]] = value
+    return data
+
+
+def test_shipped_config_loads_with_k6_converted_to_stiffness():
+    """config/control.toml loads: the right leg is torque-controlled and k6 becomes k_s = k6/(k_tau (1 + k_p))."""
+    cfg = ControlConfig.from_toml("control.toml", INFO)
+    assert cfg.torque_joints == tuple(f"RLEG_JOINT{i}" for i in range(6))
+    assert cfg.torque_mask.sum() == 6 and cfg.torque_mask[:6].all()
+    g = cfg.gains["RLEG_JOINT3"]
+    k6 = BASE["defaults"]["k6"]
+    assert g.k_s == pytest.approx(k6 / (5.1e-5 * (1.0 + g.k_p)))
+    assert cfg.joint_vector("k_s")[6:].tolist() == [0.0] * 24
+    assert cfg.motor_vector("k_tau")[3] == 5.1e-5
+
+
+def test_joint_table_overrides_defaults_in_either_unit():
+    """A [joints.X] table overrides [defaults]; k_s given in SI is kept as is, k6 is converted."""
+    data = _with("joints", {"RLEG_JOINT3": {"k_s": 1234.0, "k_p": 2.0}, "RLEG_JOINT2": {"k6": 0.5, "k_p": 2.0}})
+    cfg = ControlConfig.from_mapping(data, INFO)
+    assert cfg.gains["RLEG_JOINT3"].k_s == 1234.0
+    assert cfg.gains["RLEG_JOINT3"].k_p == 2.0
+    assert cfg.gains["RLEG_JOINT2"].k_s == pytest.approx(0.5 / (1.2e-4 * 3.0))
+
+
+@pytest.mark.parametrize("path, value, field, expected", [
+    ("defaults.k_p", -2.0, "defaults.k_p", ">= 0"),
+    ("defaults.k6", math.nan, "defaults.k6", "finite"),
+    ("defaults.k_i", "high", "defaults.k_i", "finite number"),
+    ("joints", {"RLEG_JOINT3": {"k_d": -1.0}}, "joints.RLEG_JOINT3.k_d", ">= 0"),
+    ("joints", {"RLEG_JOINT3": {"k6": 1.0, "k_s": 10.0}}, "joints.RLEG_JOINT3.k_s", "either k6 or k_s"),
+    ("joints", {"LARM_JOINT0": {}}, "joints.LARM_JOINT0", "torque_joints"),
+    ("joints", {"RLEG_JOINT3": {"kp": 2.0}}, "joints.RLEG_JOINT3.kp", "known field"),
+    ("torque_joints", ["RLEG_JOINT3", "NOT_A_JOINT"], "torque_joints", "joints of test-robot"),
+    ("torque_joints", ["LLEG_JOINT3"], "torque_joints", "motor model"),
+    ("base", "wobbly", "base", "fixed"),
+    ("sign_velocity", 0.0, "sign_velocity", "> 0"),
+    ("fade_time", -1.0, "fade_time", ">= 0"),
+    ("contacts", ["left_knee"], "contacts", "F/T sensors"),
+    ("safety.max_torque", -5.0, "safety.max_torque", "> 0"),
+    ("safety.max_velocity", math.inf, "safety.max_velocity", "finite"),
+    ("safety.joints", {"KNEE": {"max_torque": 10.0}}, "safety.joints.KNEE", "joint of test-robot"),
+    ("force", {"sensor": "right_ankle", "frame": "ft_right_ankle", "axes": ["fz", "fw"], "k_f": [1.0, 1.0]},
+     "force.axes", "distinct axes"),
+    ("force", {"sensor": "right_ankle", "frame": "ft_right_ankle", "axes": ["fz"], "k_f": [-1.0]},
+     "force.k_f", ">= 0"),
+    ("version", 2, "version", "1"),
+    ("motors", "motors/missing.toml", "motors", "not found"),
+])
+def test_bad_field_names_the_field_and_the_expected_value(path, value, field, expected):
+    """Negative, NaN, mistyped or unknown values raise ConfigError naming the file, the field and what was expected."""
+    with pytest.raises(ConfigError) as info:
+        ControlConfig.from_mapping(_with(path, value), INFO, file="ctl.toml")
+    msg = str(info.value)
+    assert "ctl.toml" in msg and field in msg and expected in msg, msg
+
+
+@pytest.mark.parametrize("build, field", [
+    (lambda: JointGains(k_p=-1.0), "JointGains.k_p"),
+    (lambda: JointGains(k_s=float("nan")), "JointGains.k_s"),
+    (lambda: ForceTask(axes=("fz",), k_f=(1.0, 2.0)), "ForceTask.k_f"),
+    (lambda: ForceTask(sensor="nose"), "ForceTask.sensor"),
+    (lambda: SafetyLimits.uniform(30, max_torque=0.0), "SafetyLimits.max_torque"),
+    (lambda: ControlConfig(JOINT_NAMES, {"RLEG_JOINT3": JointGains()}, {}, SafetyLimits.uniform(30)), "motor model"),
+    (lambda: ControlConfig(JOINT_NAMES, {"KNEE": JointGains()}, {}, SafetyLimits.uniform(30)), "KNEE"),
+])
+def test_direct_construction_is_validated(build, field):
+    """The dataclasses built in code raise ControlError naming the field and the expected value."""
+    with pytest.raises(ControlError, match=field) as info:
+        build()
+    assert "expected" in str(info.value)

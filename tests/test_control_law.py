@@ -1,0 +1,88 @@
+"""Tests of servotau.control.law: the full law and its split into the paper's components (eq. 13-14, section 5.5)."""
+
+import numpy as np
+import pytest
+
+from servotau.config import CONFIG_DIR
+from servotau.control.config import ControlConfig, ForceTask, JointGains, SafetyLimits
+from servotau.control.gains import k9_from_kf
+from servotau.control.law import TorqueControlLaw
+from servotau.identification.motor_params import MotorParameters
+from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH, default_joint_map, half_sitting_qpos
+
+LEG = [f"RLEG_JOINT{i}" for i in range(6)]
+
+
+def _config(force=True, k_i=0.0):
+    motors = MotorParameters.load_toml(CONFIG_DIR / "motors" / "example.toml")
+    gains = {j: JointGains(k_p=2.0, k_s=500.0 + 100 * i, k_d=5.0 + i, k_i=k_i, integral_limit=3.0)
+             for i, j in enumerate(LEG)}
+    task = ForceTask("right_ankle", "ft_right_ankle", axes=("fx", "fz", "ty"), k_f=(0.5, 1.0, 0.2)) if force else None
+    return ControlConfig(JOINT_NAMES, gains, motors, SafetyLimits.uniform(30), contacts=("right_ankle",), force=task)
+
+
+def _inputs(seed=0):
+    rng = np.random.default_rng(seed)
+    q = half_sitting_qpos()[default_joint_map().mj_qpos]
+    q_hat = q + rng.normal(0, 0.01, 30)
+    dq_hat, ddq_hat = rng.normal(0, 0.3, 30), rng.normal(0, 3, 30)
+    w = rng.normal(0, 5, (4, 6))
+    w[0, 2] = 120.0
+    return q_hat, dq_hat, ddq_hat, q, rng.normal(0, 0.3, 30), rng.normal(0, 3, 30), w, rng
+
+
+@pytest.mark.parametrize("force, k_i", [(True, 0.0), (False, 0.0), (True, 5.0)])
+def test_components_sum_to_the_command(force, k_i):
+    """ff_torque + ff_friction + fb_* (+ residual, integral) equals dq_err exactly, with and without force task."""
+    law = TorqueControlLaw(_config(force, k_i), str(MODEL_PATH), 1e-3)
+    terms = law.make_terms()
+    q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, w, rng = _inputs()
+    if force:
+        law.inverse_dynamics.set_force_reference([10.0, 0.0, 150.0, 0.0, 2.0, 0.0])
+    for _ in range(3):
+        tau_hat = rng.normal(0, 20, 30)
+        dq_err = law.update(terms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, w)
+    np.testing.assert_allclose(terms.component_sum(), dq_err, atol=1e-15)
+    assert np.abs(dq_err[:6]).min() > 0 and not dq_err[6:].any()
+    assert np.abs(terms.fb_integral).max() > 0 if k_i else not terms.fb_integral.any()
+
+
+def test_components_are_k6_to_k9_of_the_paper():
+    """The fb_* terms are K6 e_q, K7 de_q, K8 dde_q, K9 e_f; the residual is 0 if tau_hat is the model's torque."""
+    cfg = _config()
+    law = TorqueControlLaw(cfg, str(MODEL_PATH), 1e-3)
+    terms = law.make_terms()
+    q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, w, _ = _inputs(seed=2)
+    law.inverse_dynamics.set_force_reference([10.0, 0.0, 150.0, 0.0, 2.0, 0.0])
+    idc = law.inverse_dynamics
+    # tau_hat = M ddq_hat + h - J^T f_hat: the paper's assumption, which makes the residual vanish.
+    law.update(terms, q_hat, dq_hat, ddq_hat, np.zeros(30), q_d, dq_d, ddq_d, w)
+    tau_model = idc.b_hat - idc.jtf_hat
+    law.update(terms, q_hat, dq_hat, ddq_hat, tau_model, q_d, dq_d, ddq_d, w)
+    leg = slice(0, 6)
+    k_tau, k_p = cfg.motor_vector("k_tau")[leg], cfg.joint_vector("k_p")[leg]
+    k_s, k_d = cfg.joint_vector("k_s")[leg], cfg.joint_vector("k_d")[leg]
+    mass = idc.dyn.mass_matrix()[leg, :]  # joint rows of the leg, all columns
+    np.testing.assert_allclose(terms.fb_position[leg], k_tau * (1 + k_p) * k_s * (q_d - q_hat)[leg], rtol=1e-12)
+    np.testing.assert_allclose(terms.fb_velocity[leg], k_tau * (1 + k_p) * k_d * (dq_d - dq_hat)[leg], rtol=1e-12)
+    np.testing.assert_allclose(terms.fb_acceleration[leg], (k_tau * k_p)[:, None] * mass @ (ddq_d - ddq_hat),
+                               rtol=1e-9, atol=1e-15)
+    axes = cfg.force.axis_index
+    jac = idc.task_jacobian[:, leg]
+    k9 = k9_from_kf(k_tau, k_p, jac, np.array(cfg.force.k_f))
+    np.testing.assert_allclose(terms.fb_force[leg], k9 @ terms.e_f[axes], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(terms.fb_torque_residual, 0.0, atol=1e-15)
+    f_ff = w[0].copy()
+    f_ff[axes] = idc.f_d[axes]
+    expected_ff = k_tau * (idc.b_d - idc.contact_jacobian("right_ankle").T @ f_ff)[leg]
+    np.testing.assert_allclose(terms.ff_torque[leg], expected_ff, rtol=1e-9)
+
+
+def test_terms_share_the_law_buffers():
+    """make_terms() exposes the law's own arrays (no copy per tick): tau_d and tau_star are the same objects."""
+    law = TorqueControlLaw(_config(False), str(MODEL_PATH), 1e-3)
+    terms = law.make_terms()
+    assert terms.tau_d is law.inverse_dynamics.tau_d
+    assert terms.tau_star is law.torque.tau_star
+    law.clear(terms)
+    assert not any(v.any() for v in terms.components().values())
