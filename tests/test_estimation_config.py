@@ -1,0 +1,67 @@
+"""Tests of the estimator settings (estimation/config.py, config/estimation.toml)."""
+
+import numpy as np
+import pytest
+
+from servotau.errors import ConfigError, EstimationError
+from servotau.estimation.config import EstimatorConfig, FilterSettings, ModelPerturbation, PredictionSettings
+
+
+def test_default_file_gives_the_paper_settings():
+    """config/estimation.toml: 80-sample windows, order 2 encoders, order 1 IMU and F/T, centred."""
+    cfg = EstimatorConfig.from_toml()
+    assert cfg.encoders == FilterSettings(80, 2)
+    assert cfg.imu == FilterSettings(80, 1) and cfg.ft == FilterSettings(80, 1)
+    assert cfg.eval_at == "centre" and cfg.angular_acceleration == "savgol"
+    assert cfg.unknown_wrench_link == "CHEST_LINK1"
+    assert not cfg.ft_offsets.any() and not cfg.gyro_bias.any() and cfg.armature and cfg.align
+    assert not cfg.perturbation.enabled and not cfg.prediction.enabled
+
+
+def test_low_delay_variant_evaluates_at_the_newest_sample_with_one_order_more():
+    """variant="low_delay": eval_at "last", encoders order 3 and IMU order 2 (no delayed top derivative)."""
+    cfg = EstimatorConfig.from_toml(variant="low_delay")
+    assert cfg.eval_at == "last"
+    assert cfg.encoders.order == 3 and cfg.imu.order == 2 and cfg.ft.order == 1
+    assert EstimatorConfig().low_delay(window=30).encoders == FilterSettings(30, 3)
+
+
+def test_toml_errors_name_the_file_and_field(tmp_path):
+    """A bad window, an unknown field or a bad choice raise ConfigError naming the field."""
+    bad = tmp_path / "est.toml"
+    bad.write_text("[filters.encoders]\nwindow = 2\norder = 2\n")
+    with pytest.raises(ConfigError, match="filters.encoders.window"):
+        EstimatorConfig.from_toml(bad)
+    bad.write_text("eval_at = 'middle'\n")
+    with pytest.raises(ConfigError, match="eval_at"):
+        EstimatorConfig.from_toml(bad)
+    bad.write_text("windw = 3\n")
+    with pytest.raises(ConfigError, match="windw"):
+        EstimatorConfig.from_toml(bad)
+
+
+def test_toml_reads_calibration_perturbation_and_motor_parameters(tmp_path):
+    """Offsets, gyro bias, model perturbation and k_tau/k_v tables are read from the file."""
+    path = tmp_path / "est.toml"
+    path.write_text(
+        "[calibration]\ngyro_bias = [0.001, 0.0, -0.002]\n[calibration.ft_offsets]\n"
+        "left_wrist = [1, 2, 3, 0.1, 0.2, 0.3]\n[model]\nmass_scale_std = 0.1\nseed = 4\n"
+        "[prediction.k_tau]\nRLEG_JOINT3 = 5e-5\n[prediction.k_v]\nRLEG_JOINT3 = 6.5e-3\n"
+    )
+    cfg = EstimatorConfig.from_toml(path)
+    assert np.allclose(cfg.gyro_bias, [0.001, 0.0, -0.002])
+    assert np.allclose(cfg.ft_offsets[3], [1, 2, 3, 0.1, 0.2, 0.3]) and not cfg.ft_offsets[:3].any()
+    assert cfg.perturbation == ModelPerturbation(0.1, 0.0, 4)
+    assert cfg.prediction.k_tau == {"RLEG_JOINT3": 5e-5} and cfg.prediction.enabled
+
+
+def test_invalid_direct_construction_raises_estimation_error():
+    """Direct construction validates: order >= window, bad shapes, mismatched motor tables."""
+    with pytest.raises(EstimationError, match="window"):
+        FilterSettings(3, 2)
+    with pytest.raises(EstimationError, match="ft_offsets"):
+        EstimatorConfig(ft_offsets=np.zeros((3, 6)))
+    with pytest.raises(EstimationError, match="same joints"):
+        PredictionSettings(k_tau={"RLEG_JOINT3": 1e-4}, k_v={})
+    with pytest.raises(EstimationError, match="encoders.order"):
+        EstimatorConfig(encoders=FilterSettings(20, 1))
