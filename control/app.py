@@ -1,6 +1,6 @@
 """``servotau control``: the controller process.
 
-Connects to the robot through the HAL (backend chosen in config/robot.toml or by ``--backend``),
+Connects to the robot through the HAL (backend chosen in config/hal.toml or by ``--backend``),
 estimates joint torques, runs the right-leg swing in position or torque mode, records a Parquet log
 and streams to Rerun. On a safety trip the robot is held in position and the process exits with
 code 3; if the robot disappears it exits with code 4.
@@ -36,7 +36,7 @@ class SessionResult:
 
 def register(sub) -> None:
     p = sub.add_parser("control", help="run the controller on a HAL backend (sim or real robot)")
-    p.add_argument("--robot", default="robot.toml", help="backend config file (config/robot.toml)")
+    p.add_argument("--hal", default="hal.toml", help="HAL config: [hal] backend = zenoh | inprocess | replay")
     p.add_argument("--backend", choices=("zenoh", "inprocess", "replay"), help="override the config's backend")
     p.add_argument("--port", type=int, help="zenoh: the robot's port on 127.0.0.1 (overrides the config)")
     p.add_argument("--mode", choices=("position", "torque"), default="position")
@@ -114,13 +114,17 @@ def main(args) -> int:
     from servotau.hal.factory import open_backend, overrides_from_args
     from servotau.hal.log import LogWriter
 
-    backend = open_backend(args.robot, **overrides_from_args(args))
+    backend = open_backend(args.hal, **overrides_from_args(args))
     rec = open_recording(args.rerun)
     stream = RerunStream(rec, backend.info.joint_names, backend.info.model_path) if rec is not None else None
-    writer = LogWriter(args.log, backend.info) if args.log else None
+    writer = LogWriter(args.log, backend.info, metadata={"mode": args.mode}) if args.log else None
+
+    def record(frame, q_des, estimate, truth):
+        writer.append(frame, q_des, truth, {"est/tau": estimate.tau, "est/dq": estimate.dq})
+
     try:
         result = run_session(backend, mode=args.mode, duration=args.duration, stream=stream,
-                             writer=writer.record if writer else None)
+                             writer=record if writer else None)
     except HalError as exc:
         print(f"servotau control: robot lost: {exc}", file=sys.stderr)
         return 4

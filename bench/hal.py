@@ -1,0 +1,153 @@
+"""Speed of the HAL: lock-step over Zenoh between two processes, round trip, real-time jitter, codec.
+
+Usage:
+    python bench/hal.py --json                  # one JSON object (real-time part: 60 s)
+    python bench/hal.py --json --duration 5     # shorter real-time part
+    python bench/hal.py --robot servotau.simrobot.sim:SimRobot.from_config --scenario sim.toml
+
+The robot process is ``python -m servotau.hal`` (the HAL server) on tcp/127.0.0.1 (a free port),
+serving tests/fake_robot.py's FakeRobot (30 joints) unless ``--robot`` names another factory; the
+controller (this process) reads a frame and writes 30 desired angles by name every tick (no ground
+truth: a pure controller).
+
+- ``lockstep_rtf``: lock-step, simulated seconds per wall second (target >= 2).
+- ``rtt_p50_us`` / ``rtt_p99_us``: lock-step, frame published -> its command received, robot side.
+- ``realtime_late_fraction``: real-time mode (1 kHz), fraction of ticks starting more than one
+  period late, over ``--duration`` seconds.
+- ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
+
+Wall-clock figures depend on the machine's load: ``cpu_count`` and ``loadavg_1min`` are reported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import timeit
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+TESTS = ROOT / "tests"
+sys.path.insert(0, str(TESTS))
+
+from servotau.hal import ZenohBackend  # noqa: E402
+from servotau.hal.protocol import decode_frame, encode_frame  # noqa: E402
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def _server(robot: str, scenario: str | None, clock: str):
+    port = _free_port()
+    with tempfile.TemporaryDirectory() as tmp:
+        ready = Path(tmp) / "ready"
+        args = [sys.executable, "-m", "servotau.hal", "--robot", robot, "--listen", f"tcp/127.0.0.1:{port}",
+                "--clock", clock, "--ready-file", str(ready)]
+        if scenario:
+            args += ["--scenario", scenario]
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
+        p = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            deadline = time.monotonic() + 30
+            while not ready.exists():
+                if p.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"robot server did not start ({' '.join(args)})")
+                time.sleep(0.01)
+            with ZenohBackend(_robot_name(robot, scenario), connect=[f"tcp/127.0.0.1:{port}"], truth=False) as backend:
+                yield backend
+        finally:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                try:
+                    p.wait(10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+
+
+def _robot_name(robot: str, scenario: str | None) -> str:
+    from servotau.hal import import_object
+
+    if robot == "fake_robot:FakeRobot":
+        return "fake"
+    factory = import_object(robot)
+    return (factory(scenario) if scenario else factory()).info.name
+
+
+def _control(backend: ZenohBackend, seconds: float | None = None, ticks: int | None = None) -> tuple[int, float]:
+    """Read/write loop: hold the first posture plus a small sinusoid on one joint; (ticks, wall s)."""
+    names = backend.info.joint_names
+    f0 = backend.read()
+    q0 = dict(zip(names, f0.q.tolist(), strict=True))
+    f, k, t0 = f0, 0, time.perf_counter()
+    while (ticks is None or k < ticks) and (seconds is None or time.perf_counter() - t0 < seconds):
+        q0[names[0]] = float(f0.q[0] + 0.01 * np.sin(2 * np.pi * f.time))
+        backend.write(q0)
+        f = backend.read()
+        k += 1
+    return k, time.perf_counter() - t0
+
+
+def bench_lockstep(robot: str, scenario: str | None, ticks: int) -> dict:
+    with _server(robot, scenario, "lockstep") as b:
+        _control(b, ticks=200)  # warm up
+        n, wall = _control(b, ticks=ticks)
+        st = b.status()
+    return {"lockstep_rtf": n * b.info.period / wall, "lockstep_tick_us": wall / n * 1e6,
+            "rtt_p50_us": st["rtt_p50_us"], "rtt_p99_us": st["rtt_p99_us"]}
+
+
+def bench_realtime(robot: str, scenario: str | None, duration: float) -> dict:
+    with _server(robot, scenario, "realtime") as b:
+        st0 = b.status()
+        _control(b, seconds=duration)
+        st = b.status()
+    ticks = st["ticks"] - st0["ticks"]
+    late = st["late_ticks"] - st0["late_ticks"]
+    return {"realtime_late_fraction": late / max(ticks, 1), "realtime_ticks": ticks,
+            "realtime_holds": st["holds"]}
+
+
+def bench_codec() -> dict:
+    from fake_robot import FakeRobot
+
+    frame = FakeRobot().read()
+    buf = encode_frame(frame)
+    n = 20_000
+    enc = min(timeit.repeat(lambda: encode_frame(frame), number=n, repeat=5)) / n
+    dec = min(timeit.repeat(lambda: decode_frame(buf, 30), number=n, repeat=5)) / n
+    return {"encode_us": enc * 1e6, "decode_us": dec * 1e6, "frame_bytes": len(buf)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--duration", type=float, default=60.0, help="real-time part [s] (default 60)")
+    ap.add_argument("--ticks", type=int, default=5000, help="lock-step ticks (default 5000)")
+    ap.add_argument("--robot", default="fake_robot:FakeRobot", help="robot factory 'module:callable'")
+    ap.add_argument("--scenario", help="config path passed to the robot factory")
+    args = ap.parse_args()
+    out = {**bench_codec(), **bench_lockstep(args.robot, args.scenario, args.ticks),
+           **bench_realtime(args.robot, args.scenario, args.duration),
+           "robot": args.robot, "cpu_count": os.cpu_count(), "loadavg_1min": os.getloadavg()[0]}
+    out = {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
+    print(json.dumps(out) if args.json else json.dumps(out, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,28 @@
+"""Errors of the hardware abstraction layer.
+
+All derive from :class:`servotau.errors.HalError` (itself a ``RuntimeError``); each also inherits
+from the matching built-in so that callers can catch either.
+"""
+
+from __future__ import annotations
+
+from servotau.errors import HalError, HalTimeoutError
+
+
+class MalformedMessage(HalError, ValueError):
+    """A wire message failed validation (magic, type, lengths, finite values); never applied."""
+
+
+class ProtocolVersionMismatch(MalformedMessage):
+    """A wire message or a peer speaks another protocol version."""
+
+
+class RobotLost(HalError, ConnectionError):
+    """The robot process disappeared (its liveliness token vanished): the controller must stop."""
+
+
+class EndOfLog(HalError, EOFError):
+    """A replayed log has no more frames."""
+
+
+__all__ = ["EndOfLog", "HalError", "HalTimeoutError", "MalformedMessage", "ProtocolVersionMismatch", "RobotLost"]

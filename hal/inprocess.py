@@ -1,0 +1,102 @@
+"""A served robot in the controller's process: same firmware safety and lock-step semantics as the
+Zenoh server, no transport, deterministic (the watchdog counts in robot time). For tests and batch
+experiments."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .backend import Backend
+from .firmware import Firmware, SafetyConfig
+from .log import LogWriter
+from .served import ServedRobot
+from .types import SensorFrame
+
+if TYPE_CHECKING:
+    from servotau.simrobot.truth import GroundTruth
+
+
+class InProcessBackend(Backend):
+    """Drives ``robot`` directly: :meth:`write` steps it once (the first command answering a frame
+    wins, later ones are counted stale); :meth:`read` after :meth:`read` without a write steps it
+    with no fresh command (the watchdog holds after ``hold_after`` [s] of robot time).
+
+    Args:
+        robot: the served robot.
+        safety: firmware settings (watchdog, position-error trip).
+        log: optional Parquet path recording what the robot side saw (like the server's log).
+    """
+
+    def __init__(self, robot: ServedRobot, safety: SafetyConfig | None = None, log: str | None = None):
+        self.robot = robot
+        self.firmware = Firmware(robot.info, safety)
+        self._current = robot.read()  # frame of the current tick
+        self._stepped_seq = -1  # seq of the last frame the robot stepped past
+        self._servo_off = False
+        self._want_truth = False  # ground_truth() was called: keep the truth of each stepped tick
+        self._truth_before_step = None  # (seq, GroundTruth) of the last stepped tick
+        self._log = None
+        if log:
+            from .server import LOG_EXTRA
+
+            self._log = LogWriter(log, robot.info, truth=True, extra=LOG_EXTRA,
+                                  metadata={"servotau.source": "inprocess"})
+        super().__init__(robot.info, self._current)
+
+    def _step(self) -> None:
+        frame, fw = self._current, self.firmware
+        truth = self.robot.ground_truth() if self._log is not None or self._want_truth else None
+        if self._want_truth:
+            self._truth_before_step = (frame.seq, truth)
+        q_apply = fw.output(frame.q, frame.time)
+        if self._log is not None:
+            self._log.append(frame, q_apply, truth, {"hal/state": float(fw.state), "hal/wall_time": np.nan})
+        if q_apply is None:
+            if not self._servo_off:
+                self.robot.servo_off()
+                self._servo_off = True
+            self.robot.step(np.array(frame.q, dtype=float))
+        else:
+            self.robot.step(q_apply)
+        self._stepped_seq = frame.seq
+        self._current = self.robot.read()
+
+    def read(self, timeout: float | None = None) -> SensorFrame:
+        if self._last_read is not None and self._current.seq == self._last_read.seq:
+            self._step()  # read twice without a write: step without a fresh command
+        return self._returned(self._current)
+
+    def _send(self, q_des: np.ndarray, answers: SensorFrame) -> None:
+        if answers.seq <= self._stepped_seq:
+            self.firmware.stale()
+            return
+        self.firmware.accept(q_des, self._current.time)
+        self._step()
+
+    def ground_truth(self) -> GroundTruth | None:
+        """Ground truth of the tick of the last frame read (once the robot has stepped past it, only
+        if ground_truth() was already called before that step); before the first read: the current."""
+        self._want_truth = True
+        last = self._last_read
+        if last is None or last.seq == self._current.seq:
+            return self.robot.ground_truth()
+        if self._truth_before_step is not None and self._truth_before_step[0] == last.seq:
+            return self._truth_before_step[1]
+        return None
+
+    @property
+    def robot_state(self) -> str:
+        """Robot-side firmware state: waiting, running, holding or servo_off."""
+        return self.firmware.state.name.lower()
+
+    def status(self) -> dict:
+        return {"robot": self.info.name, "clock": "inprocess", "seq": self._current.seq,
+                "time": self._current.time, **self.firmware.status()}
+
+    def close(self) -> None:
+        if self._log is not None:
+            self._log.close()
+        super().close()
+

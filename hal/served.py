@@ -1,0 +1,32 @@
+"""What a robot process serves: the interface the simulator (and a real-robot bridge) implements."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+import numpy as np
+
+from .types import RobotInfo, SensorFrame
+
+if TYPE_CHECKING:
+    from servotau.simrobot.truth import GroundTruth
+
+
+@runtime_checkable
+class ServedRobot(Protocol):
+    """A robot driven one period at a time by :class:`~servotau.hal.server.RobotServer` or
+    :class:`~servotau.hal.inprocess.InProcessBackend`, behind the robot-side firmware."""
+
+    info: RobotInfo
+
+    def read(self) -> SensorFrame:
+        """Sensors of the current tick (same seq until the next :meth:`step`)."""
+
+    def step(self, q_des: np.ndarray) -> None:
+        """Apply desired angles [rad] (``info.joint_names`` order) for one period, advance one tick."""
+
+    def servo_off(self) -> None:
+        """Cut the servos (latched): no motor current from now on; :meth:`step` still advances time."""
+
+    def ground_truth(self) -> GroundTruth | None:
+        """Simulator state of the current tick; None on a real robot."""

@@ -1,0 +1,410 @@
+"""Robot side of the HAL: serves a :class:`ServedRobot` over Zenoh behind the firmware safety.
+
+Per tick k: read the sensors, publish frame k (and ground truth k), take the command, run the
+firmware (:mod:`servotau.hal.firmware`), step the robot. Clock modes:
+
+- ``lockstep`` (default): wait for the command answering frame k, then step: as fast as the
+  controller, deterministic. Before the first command the robot does not move and frame 0 is
+  republished every ``republish_interval`` (late joiners). Without a fresh command the watchdog
+  counts in wall time; once holding, the robot steps one tick per period of wall time.
+- ``realtime``: one tick per period of wall time (1 kHz on HRP-2); the newest command wins.
+- ``robot``: as realtime, but paced by the robot itself (a real robot's ``step()`` blocks until
+  its next tick).
+
+Run it as ``python -m servotau.hal --robot module:callable`` (see ``--help``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from servotau.config import Section
+
+from .errors import HalError, MalformedMessage, ProtocolVersionMismatch
+from .firmware import Firmware, FirmwareState, SafetyConfig
+from .log import LogWriter
+from .protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
+from .served import ServedRobot
+from .zenoh_session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
+
+logger = logging.getLogger(__name__)
+
+CLOCKS = ("lockstep", "realtime", "robot")
+LOG_EXTRA = ("hal/state", "hal/wall_time")  # firmware state (FirmwareState) and time.monotonic() [s]
+_RTT_WINDOW = 100_000  # last RTT samples kept for the percentiles
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """How a robot is served (``[server]`` table of a config, see :meth:`from_section`)."""
+
+    robot: str | None = None  # robot name in the key expressions; None: RobotInfo.name
+    listen: tuple[str, ...] = (DEFAULT_ENDPOINT,)
+    connect: tuple[str, ...] = ()
+    mode: str = "peer"  # zenoh mode: peer, or client of a router
+    clock: str = "lockstep"  # lockstep, realtime or robot
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    republish_interval: float = 0.02  # [s] lock-step: republish the frame while waiting for a controller
+    log: str | None = None  # Parquet log of what was served (frames, applied q_des, truth)
+    max_ticks: int | None = None  # stop after this many steps
+    publish_truth: bool = True
+
+    def __post_init__(self):
+        if self.clock not in CLOCKS:
+            raise HalError(f"server clock {self.clock!r}: expected one of {list(CLOCKS)}")
+
+    @classmethod
+    def from_section(cls, s: Section, safety: SafetyConfig | None = None) -> ServerConfig:
+        """Read robot, listen, connect, mode, clock, republish_interval, log, max_ticks, publish_truth;
+        every error names the file and the field (see :func:`servotau.hal.factory.server_config`)."""
+        from .factory import _str_list
+
+        s.check_keys(["robot", "listen", "connect", "mode", "clock", "republish_interval", "log", "max_ticks",
+                      "publish_truth"])
+        connect = _str_list(s, "connect", [])
+        return cls(
+            robot=s.str("robot") if "robot" in s else None,
+            listen=tuple(_str_list(s, "listen", [] if connect else [DEFAULT_ENDPOINT])),
+            connect=tuple(connect),
+            mode=s.str("mode", "peer", choices=["peer", "client"]),
+            clock=s.str("clock", "lockstep", choices=CLOCKS),
+            safety=safety or SafetyConfig(),
+            republish_interval=s.float("republish_interval", 0.02, min=0, strict_min=True, unit="s"),
+            log=s.str("log") if "log" in s else None,
+            max_ticks=s.int("max_ticks", min=1) if "max_ticks" in s else None,
+            publish_truth=s.bool("publish_truth", True),
+        )
+
+
+class RobotServer:
+    """Serves one robot until :meth:`stop`, ``max_ticks`` or an error (see the module docstring)."""
+
+    def __init__(self, robot: ServedRobot, config: ServerConfig | None = None,
+                 on_ready: Callable[[], None] | None = None):
+        self.robot = robot
+        self.on_ready = on_ready  # called once the robot is served (token declared)
+        self.config = config or ServerConfig()
+        self.info = robot.info
+        self.keys = keys(self.config.robot or self.info.name)
+        self.lockstep = self.config.clock == "lockstep"
+        safety = self.config.safety.for_lockstep() if self.lockstep else self.config.safety
+        self.firmware = Firmware(self.info, safety)
+        # Everything below is guarded by _cond; a tick runs in the thread that triggers it: the command
+        # callback in lock-step (no thread hand-off on the critical path), else the run() thread.
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._serving = False
+        self._error: BaseException | None = None  # raised by run() (a tick failed in the callback thread)
+        self._log: LogWriter | None = None
+        self._frame = None  # current frame: published, not stepped yet
+        self._truth = None
+        self._servo_off_sent = False
+        self._pending: tuple[np.ndarray, float] | None = None  # real time: newest (q_des, receive time)
+        self._published = -1  # seq of the last published frame
+        self._t_published = math.nan  # when it was (last) published, time.monotonic() [s]
+        self._last_accepted = -1  # real-time: seq answered by the newest accepted command
+        self._controller_alive = False
+        self._controller_lost = False
+        self._rtt = np.zeros(_RTT_WINDOW)
+        self._n_rtt = 0
+        self.ticks = 0
+        self.late_ticks = 0
+        self._session: Session | None = None
+
+    # -- zenoh callbacks (zenoh-python's callback thread) ------------------------------------------
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        t = time.monotonic()
+        buf = sample.payload.to_bytes()
+        try:
+            seq, _, q_des = decode_command(buf, self.info.joint_names)
+        except ProtocolVersionMismatch as exc:
+            with self._cond:
+                self.firmware.reject(str(exc), version=True)
+            return
+        except MalformedMessage as exc:
+            with self._cond:
+                self.firmware.reject(str(exc))
+            return
+        with self._cond:
+            if seq > self._published:
+                self.firmware.reject(f"answers frame {seq}, not published yet (last: {self._published})")
+                return
+            if seq == self._published:  # round trip: frame published -> its command received
+                self._rtt[self._n_rtt % _RTT_WINDOW] = t - self._t_published
+                self._n_rtt += 1
+            if not self._serving:
+                return
+            if not self.lockstep:
+                if seq >= self._last_accepted:  # real time: the newest command wins
+                    self._pending = (q_des, t)
+                    self._last_accepted = seq
+                else:
+                    self.firmware.stale()
+            elif seq == self._frame.seq:  # lock-step: the command answering the current frame
+                self.firmware.accept(q_des, t)
+                try:
+                    self._tick(time.monotonic())
+                except BaseException as exc:  # reported by run()
+                    self._error = exc
+                    self._stop.set()
+                    self._cond.notify_all()
+            else:
+                self.firmware.stale()
+
+    def _on_controller_liveliness(self, sample: zenoh.Sample) -> None:
+        with self._cond:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                logger.warning("%s: controller liveliness token gone", self.info.name)
+                self._controller_alive = False
+                self._controller_lost = True
+                self._cond.notify_all()
+            else:
+                self._controller_alive = True
+
+    def _on_truth_matching(self, status: zenoh.MatchingStatus) -> None:
+        self._truth_wanted = status.matching
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        key = str(query.key_expr)
+        body = info_to_json(self.info) if key == self.keys.info else json.dumps(self.status())
+        query.reply(key, body)
+
+    # -- public ------------------------------------------------------------------------------------
+    def status(self) -> dict:
+        """Firmware state and counters, clock mode, timing: JSON-ready (also on ``.../status``)."""
+        n = min(self._n_rtt, _RTT_WINDOW)
+        rtt = self._rtt[:n] * 1e6
+        with self._cond:
+            fw = self.firmware.status()
+        return {
+            "robot": self.info.name, "protocol": PROTOCOL_VERSION, "clock": self.config.clock,
+            "seq": self._published, "time": self._frame.time if self._frame is not None else None,
+            "ticks": self.ticks, "late_ticks": self.late_ticks,
+            "controller_alive": self._controller_alive,
+            "rtt_p50_us": float(np.percentile(rtt, 50)) if n else None,
+            "rtt_p99_us": float(np.percentile(rtt, 99)) if n else None,
+            "rtt_samples": n, **fw,
+        }
+
+    def stop(self) -> None:
+        """Ask :meth:`run` to return after the current tick (thread- and signal-safe)."""
+        self._stop.set()
+        if self._cond.acquire(blocking=False):  # never block inside a signal handler
+            try:
+                self._cond.notify_all()
+            finally:
+                self._cond.release()
+
+    def run(self) -> None:
+        """Serve until stopped; always closes the session and the log."""
+        cfg = self.config
+        try:
+            self._open()
+            if cfg.log:
+                self._log = LogWriter(cfg.log, self.info, truth=True, extra=LOG_EXTRA,
+                                      metadata={"servotau.source": "server", "servotau.clock": cfg.clock})
+            with self._cond:
+                self._frame = self.robot.read()
+                self._serving = True
+                self._publish()
+            if self.lockstep:
+                self._run_lockstep()
+            else:
+                self._run_realtime()
+        finally:
+            with self._cond:
+                self._serving = False
+            try:
+                self.close()  # first: the controller sees the robot go away at once
+            finally:
+                if self._log is not None:
+                    self._log.close()
+        if self._error is not None:
+            raise self._error
+
+    def close(self) -> None:
+        if self._session is not None:
+            self._session.close()
+
+    # -- internals ---------------------------------------------------------------------------------
+    def _open(self) -> None:
+        cfg, k = self.config, self.keys
+        s = self._session = Session(zenoh_config(listen=cfg.listen, connect=cfg.connect, mode=cfg.mode))
+        z = s.z
+        cc = zenoh.CongestionControl.BLOCK if self.lockstep else zenoh.CongestionControl.DROP
+        self._pub_frame = s.keep(z.declare_publisher(k.frame, express=True, congestion_control=cc,
+                                                     priority=zenoh.Priority.REAL_TIME))
+        self._pub_truth = s.keep(z.declare_publisher(k.truth, express=True, congestion_control=cc,
+                                                     priority=zenoh.Priority.DATA_HIGH))
+        self._truth_wanted = False  # somebody subscribes to the truth (no encoding for nobody)
+        s.keep(self._pub_truth.declare_matching_listener(callback(self._on_truth_matching)))
+        s.keep(z.declare_subscriber(k.command, callback(self._on_command)))
+        s.keep(z.liveliness().declare_subscriber(k.alive_controller, callback(self._on_controller_liveliness),
+                                                 history=True))
+        s.keep(z.declare_queryable(k.info, callback(self._on_query)))
+        s.keep(z.declare_queryable(k.status, callback(self._on_query)))
+        s.keep(z.liveliness().declare_token(k.alive_robot))
+        if self.on_ready is not None:
+            self.on_ready()
+        logger.info("serving %s on %s (%s, %s)", self.info.name, k.prefix, cfg.clock,
+                    ", ".join(cfg.listen or cfg.connect))
+
+    def _publish(self, truth: bool = True) -> None:
+        """Publish the current frame, then (``truth``) read and publish its ground truth (under _cond)."""
+        frame = self._frame
+        self._published = frame.seq
+        self._t_published = time.monotonic()
+        self._pub_frame.put(encode_frame(frame, self.firmware.flags))
+        send = self.config.publish_truth and self._truth_wanted
+        if truth:  # after the frame: off the controller's critical path; only if somebody wants it
+            self._truth = self.robot.ground_truth() if send or self._log is not None else None
+        if send and self._truth is not None:
+            self._pub_truth.put(encode_truth(self._truth))
+
+    def _tick(self, now: float) -> None:
+        """Firmware, step, read, publish (under _cond). ``now``: wall time [s] (time.monotonic)."""
+        fw, robot, frame, truth = self.firmware, self.robot, self._frame, self._truth
+        if self._controller_lost:
+            self._controller_lost = False
+            fw.controller_lost()
+        q_apply = fw.output(frame.q, now)
+        state = float(fw.state)
+        if q_apply is None:
+            if not self._servo_off_sent:
+                robot.servo_off()
+                self._servo_off_sent = True
+            robot.step(np.array(frame.q, dtype=float))
+        else:
+            robot.step(q_apply)
+        self.ticks += 1
+        done = self.config.max_ticks is not None and self.ticks >= self.config.max_ticks
+        if not done:
+            self._frame = robot.read()
+            self._publish()
+        if self._log is not None:  # the row of tick k, once frame k+1 is on its way
+            self._log.append(frame, q_apply, truth, {"hal/state": state, "hal/wall_time": now})
+        if done:
+            self._serving = False
+            self._stop.set()
+            self._cond.notify_all()
+
+    def _run_lockstep(self) -> None:
+        """Watchdog side of lock-step; commands tick the robot from the callback thread."""
+        period, safety, fw = self.info.period, self.firmware.safety, self.firmware
+        with self._cond:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                state = fw.state
+                if state != FirmwareState.RUNNING:
+                    self._controller_lost = False  # nothing to hold
+                if state == FirmwareState.RUNNING:
+                    deadline = -math.inf if self._controller_lost else fw.last_command_time + safety.hold_after
+                elif state == FirmwareState.WAITING:  # no controller yet: the robot does not move
+                    deadline = self._t_published + self.config.republish_interval
+                else:  # HOLDING or SERVO_OFF: nobody commands, step in real time
+                    deadline = self._t_published + period
+                if now < deadline:
+                    self._cond.wait(deadline - now)
+                elif state == FirmwareState.WAITING:
+                    self._publish(truth=False)  # for controllers that join late
+                else:
+                    self._tick(now)  # the firmware holds (or stays off)
+
+    def _run_realtime(self) -> None:
+        period, paced = self.info.period, self.config.clock == "realtime"
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if paced:
+                next_t += period
+                self._sleep_until(next_t)
+                now = time.monotonic()
+                if now - next_t > period:
+                    self.late_ticks += 1
+                    next_t = now  # late: do not burst to catch up
+            with self._cond:
+                if self._stop.is_set():
+                    break
+                if self._pending is not None:
+                    self.firmware.accept(*self._pending)
+                    self._pending = None
+                self._tick(now)
+
+    def _sleep_until(self, deadline: float) -> None:
+        while not self._stop.is_set():
+            rem = deadline - time.monotonic()
+            if rem <= 0:
+                return
+            if rem > 3e-4:
+                time.sleep(rem - 2e-4)  # the OS wakes up late by ~0.1 ms: spin the rest
+
+
+def serve(robot: ServedRobot, config: ServerConfig | None = None,
+          on_ready: Callable[[], None] | None = None) -> RobotServer:
+    """Serve ``robot`` in the calling thread until SIGINT/SIGTERM, ``max_ticks`` or an error."""
+    server = RobotServer(robot, config, on_ready)
+    handler = lambda *_: server.stop()  # noqa: E731
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)} \
+        if threading.current_thread() is threading.main_thread() else {}
+    try:
+        server.run()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    return server
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m servotau.hal``: serve a robot built from an import string."""
+    from .factory import import_object
+
+    p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0])
+    p.add_argument("--robot", required=True, help="robot factory, 'module:callable'")
+    p.add_argument("--scenario", help="scenario config path passed to the factory")
+    p.add_argument("--kwargs", default="{}", help="JSON object of keyword arguments for the factory")
+    p.add_argument("--name", help="robot name in the keys (default: RobotInfo.name)")
+    p.add_argument("--listen", action="append", help=f"zenoh endpoint to listen on (default {DEFAULT_ENDPOINT})")
+    p.add_argument("--connect", action="append", default=[], help="zenoh endpoint to connect to (router)")
+    p.add_argument("--mode", default="peer", choices=["peer", "client"])
+    p.add_argument("--clock", default="lockstep", choices=CLOCKS)
+    p.add_argument("--log", help="Parquet log of what was served")
+    p.add_argument("--max-ticks", type=int)
+    p.add_argument("--no-truth", action="store_true", help="do not publish the ground truth")
+    p.add_argument("--hold-after", type=float, default=SafetyConfig.hold_after, help="[s]")
+    p.add_argument("--servo-off-after", type=float, default=SafetyConfig.servo_off_after, help="[s]")
+    p.add_argument("--lockstep-hold-after", type=float, help="[s] lock-step watchdog (default: --hold-after)")
+    p.add_argument("--lockstep-servo-off-after", type=float, help="[s] lock-step (default: --servo-off-after)")
+    p.add_argument("--ready-file", help="touched once the robot is served (for scripts and tests)")
+    a = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    factory = import_object(a.robot)
+    kwargs = json.loads(a.kwargs)
+    robot = factory(a.scenario, **kwargs) if a.scenario else factory(**kwargs)
+    listen = a.listen if a.listen is not None else ([] if a.connect else [DEFAULT_ENDPOINT])
+    cfg = ServerConfig(robot=a.name, listen=tuple(listen), connect=tuple(a.connect), mode=a.mode, clock=a.clock,
+                       safety=SafetyConfig(a.hold_after, a.servo_off_after,
+                                           lockstep_hold_after=a.lockstep_hold_after or a.hold_after,
+                                           lockstep_servo_off_after=a.lockstep_servo_off_after or a.servo_off_after),
+                       log=a.log, max_ticks=a.max_ticks,
+                       publish_truth=not a.no_truth)
+    ready = (lambda: Path(a.ready_file).touch()) if a.ready_file else None
+    server = serve(robot, cfg, ready)
+    print(json.dumps(server.status()), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,103 @@
+"""Zenoh sessions of the HAL: configuration (loopback by default, no multicast) and clean shutdown."""
+
+from __future__ import annotations
+
+import json
+import threading
+import weakref
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import zenoh
+
+from .errors import HalError
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+_open: weakref.WeakSet = weakref.WeakSet()
+
+
+def zenoh_config(
+    *,
+    listen: Sequence[str] = (),
+    connect: Sequence[str] = (),
+    mode: str = "peer",
+    extra: Mapping[str, Any] | None = None,
+) -> zenoh.Config:
+    """A Zenoh config: ``mode`` (peer or client), endpoints, multicast scouting off.
+
+    ``extra`` maps Zenoh config paths (e.g. ``"transport/link/tx/lease"``) to JSON values.
+    """
+    if mode not in ("peer", "client", "router"):
+        raise HalError(f"zenoh mode {mode!r}: expected 'peer', 'client' or 'router'")
+    if not listen and not connect:
+        raise HalError("zenoh endpoints: expected at least one listen or connect endpoint, e.g. "
+                       f"{DEFAULT_ENDPOINT!r}")
+    conf = zenoh.Config()
+    settings = {"mode": mode, "scouting/multicast/enabled": False,
+                "listen/endpoints": list(listen), "connect/endpoints": list(connect),
+                # retry a missing peer after 50 ms (default 1 s): a controller may start before the robot
+                "connect/retry": {"period_init_ms": 50, "period_max_ms": 1000, "period_increase_factor": 2},
+                **(extra or {})}
+    for path, value in settings.items():
+        try:
+            conf.insert_json5(path, json.dumps(value))
+        except Exception as exc:  # zenoh raises ZError
+            raise HalError(f"zenoh config {path} = {value!r} rejected: {exc}") from exc
+    return conf
+
+
+class Session:
+    """A Zenoh session whose declarations are undeclared and closed on :meth:`close`, at the latest
+    when the interpreter exits (zenoh-python's callback threads otherwise block the exit)."""
+
+    def __init__(self, config: zenoh.Config):
+        try:
+            self.z = zenoh.open(config)
+        except Exception as exc:
+            raise HalError(f"cannot open a zenoh session: {exc}") from exc
+        self._decls: list = []
+        self._lock = threading.Lock()
+        self.closed = False
+        _open.add(self)
+
+    def keep(self, decl):
+        """Remember a declaration (publisher, subscriber, token, queryable) to undeclare on close."""
+        self._decls.append(decl)
+        return decl
+
+    def close(self) -> None:
+        with self._lock:
+            if self.closed:
+                return
+            self.closed = True
+        for decl in reversed(self._decls):
+            try:
+                decl.undeclare()
+            except Exception:  # already undeclared, session gone
+                pass
+        self._decls.clear()
+        try:
+            self.z.close()
+        except Exception:
+            pass
+        _open.discard(self)
+
+
+def callback(fn):
+    """A zenoh callback handler running ``fn`` in zenoh-python's Python callback thread."""
+    return zenoh.handlers.Callback(fn)
+
+
+def _close_all() -> None:
+    for s in list(_open):
+        s.close()
+
+
+# Runs before the interpreter joins non-daemon threads (plain atexit would run after, too late).
+if hasattr(threading, "_register_atexit"):
+    threading._register_atexit(_close_all)
+else:  # pragma: no cover
+    import atexit
+
+    atexit.register(_close_all)

@@ -1,0 +1,70 @@
+"""``servotau demo``: the robot process and the controller process, as a user would start them.
+
+Starts ``servotau sim`` (lock-step, loopback, a free port), then ``servotau control`` (torque mode,
+right-leg swing) against it over Zenoh, records ``demo.rrd`` (Rerun) and ``log.parquet``, stops the
+robot process and prints a summary. Exits by itself.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from servotau.errors import HalError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("demo", help="sim robot process + controller process + Rerun recording")
+    p.add_argument("--out", default="runs/demo", help="output folder")
+    p.add_argument("--mode", choices=("position", "torque"), default="torque")
+    p.add_argument("--duration", type=float, default=3.0, help="swing duration [s]")
+    p.add_argument("--port", type=int, help="loopback port of the robot (default: a free one)")
+    p.set_defaults(func=main)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def main(args) -> int:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    port = args.port or free_port()
+    ready = out / "sim.ready"
+    ready.unlink(missing_ok=True)
+    cli = [sys.executable, "-m", "servotau.cli"]
+    print(f"[demo] starting the robot process: servotau sim --port {port}", flush=True)
+    sim = subprocess.Popen([*cli, "sim", "--port", str(port), "--ready-file", str(ready)])
+    try:
+        deadline = time.monotonic() + 60.0
+        while not ready.exists():
+            if sim.poll() is not None:
+                raise HalError(f"the robot process exited with code {sim.returncode} before serving")
+            if time.monotonic() > deadline:
+                raise HalError("the robot process did not start serving within 60 s")
+            time.sleep(0.05)
+        print("[demo] starting the controller process", flush=True)
+        rrd, log = out / "demo.rrd", out / "log.parquet"
+        ctl = subprocess.run([*cli, "control", "--port", str(port), "--mode", args.mode, "--duration",
+                              str(args.duration), "--rerun", f"save:{rrd}", "--log", str(log)])
+    finally:
+        if sim.poll() is None:
+            sim.send_signal(signal.SIGTERM)
+            try:
+                sim.wait(20)
+            except subprocess.TimeoutExpired:
+                sim.kill()
+        ready.unlink(missing_ok=True)
+    if ctl.returncode != 0:
+        print(f"[demo] the controller exited with code {ctl.returncode}", file=sys.stderr)
+        return ctl.returncode
+    print(f"[demo] done: {rrd} ({os.path.getsize(rrd) / 1e6:.1f} MB, open with .venv/bin/rerun {rrd}), "
+          f"{log} ({os.path.getsize(log) / 1e6:.1f} MB)")
+    return 0

@@ -1,0 +1,44 @@
+"""``servotau sim``: the simulated HRP-2 as a robot process, served over Zenoh through the HAL.
+
+The process speaks only the HAL protocol (docs/protocol.md), like a real-robot bridge would; ground
+truth travels on its own key for evaluation. Stop it with Ctrl-C or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sim", help="serve the simulated HRP-2 over Zenoh (the robot process)")
+    p.add_argument("--config", default="sim.toml", help="simulation config (scenario, servo, sensors, seed)")
+    p.add_argument("--hal", default="hal.toml", help="HAL config ([hal.server] and [hal.safety])")
+    p.add_argument("--port", type=int, help="listen on tcp/127.0.0.1:PORT (overrides [hal.server] listen)")
+    p.add_argument("--clock", choices=("lockstep", "realtime"), help="override [hal.server] clock")
+    p.add_argument("--seed", type=int, help="override the config's seed")
+    p.add_argument("--log", help="Parquet log of what was served (frames, applied commands, truth)")
+    p.add_argument("--max-ticks", type=int, help="stop after this many ticks")
+    p.add_argument("--ready-file", help="touched once the robot is served (for scripts)")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    from servotau.hal.factory import server_config
+    from servotau.hal.server import serve
+
+    from .sim import SimConfig, SimRobot
+
+    sim_config = SimConfig.from_toml(args.config)
+    if args.seed is not None:
+        sim_config = dataclasses.replace(sim_config, seed=args.seed)
+    config = server_config(args.hal, port=args.port)
+    changes = {k: v for k, v in (("clock", args.clock), ("log", args.log), ("max_ticks", args.max_ticks)) if v}
+    config = dataclasses.replace(config, **changes)
+    robot = SimRobot(sim_config)
+    ready = (lambda: Path(args.ready_file).touch()) if args.ready_file else None
+    print(f"servotau sim: {sim_config.scenario.name} scenario, {config.clock} clock, listening on "
+          f"{', '.join(config.listen)}", flush=True)
+    server = serve(robot, config, ready)
+    print(f"servotau sim: stopped after {robot.seq} ticks ({robot.time:.2f} s sim time)", flush=True)
+    return 0 if server is not None else 1

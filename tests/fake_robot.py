@@ -1,0 +1,69 @@
+"""A tiny served robot for the HAL tests: 30 joints, first-order position servos, seeded noise."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from servotau.hal import RobotInfo, SensorFrame
+from servotau.simrobot.truth import GroundTruth
+
+
+class FakeRobot:
+    """Implements :class:`servotau.hal.ServedRobot` without physics (deterministic for a given seed)."""
+
+    def __init__(self, scenario: str | None = None, *, seed: int = 0, n_joints: int = 30, period: float = 1e-3,
+                 time_constant: float = 0.02, noise: float = 1e-4, name: str = "fake"):
+        names = tuple(f"J{i:02d}" for i in range(n_joints))
+        self.info = RobotInfo(name=name, joint_names=names, q_min=np.full(n_joints, -1.5),
+                              q_max=np.full(n_joints, 1.5), period=period, model_path="")
+        self.time_constant = time_constant  # [s]
+        self.noise = noise  # [rad] encoder noise standard deviation
+        self._rng = np.random.default_rng(seed)
+        self._q = 0.1 * np.sin(np.arange(n_joints))  # [rad]
+        self._dq = np.zeros(n_joints)  # [rad/s]
+        self._seq = 0
+        self._off = False
+        self._frame: SensorFrame | None = None
+        self._zero_truth: GroundTruth | None = None
+        self.applied: list[np.ndarray] = []  # q_des received by step(), for tests
+
+    def _wrenches(self) -> np.ndarray:
+        w = np.zeros((4, 6))
+        w[0:2, 2] = 270.0  # [N] about half of a 55 kg robot's weight on each ankle
+        return w
+
+    def read(self) -> SensorFrame:
+        if self._frame is None or self._frame.seq != self._seq:
+            r = self._rng
+            n = self.info.nq
+            self._frame = SensorFrame(
+                time=self._seq * self.info.period,
+                seq=self._seq,
+                q=self._q + self.noise * r.standard_normal(n),
+                imu_angular_velocity=1e-3 * r.standard_normal(3),
+                imu_linear_acceleration=np.array([0.0, 0.0, 9.81]) + 1e-2 * r.standard_normal(3),
+                wrenches=self._wrenches() + 0.5 * r.standard_normal((4, 6)),
+                status=np.zeros(6, dtype=np.uint8),
+            )
+        return self._frame
+
+    def step(self, q_des: np.ndarray) -> None:
+        q_des = np.asarray(q_des, dtype=float)
+        assert q_des.shape == (self.info.nq,) and np.isfinite(q_des).all(), q_des
+        self.applied.append(q_des.copy())
+        self._dq = np.zeros(self.info.nq) if self._off else (q_des - self._q) / self.time_constant
+        self._q = self._q + self._dq * self.info.period
+        self._seq += 1
+
+    def servo_off(self) -> None:
+        self._off = True
+
+    def ground_truth(self) -> GroundTruth:
+        n = self.info.nq
+        if self._zero_truth is None:  # every field, zeros
+            self._zero_truth = GroundTruth.from_vector(0.0, 0, np.zeros(100 * n + 1000), n)
+        return replace(self._zero_truth, time=self._seq * self.info.period, seq=self._seq, q=self._q.copy(),
+                       dq=self._dq.copy(), base_position=np.array([0.0, 0.0, 0.65]),
+                       base_quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), wrenches=self._wrenches())

@@ -1,0 +1,90 @@
+"""Helpers of the HAL tests: free ports, robot-server and controller subprocesses (always cleaned up)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+TESTS = Path(__file__).resolve().parent
+ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child
+    """Linux: the child gets SIGTERM if the test process dies (no orphan robot servers)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def endpoint(port: int) -> str:
+    return f"tcp/127.0.0.1:{port}"
+
+
+def stop_process(p: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
+    """Stop ``p`` (``sig``, then SIGKILL after ``timeout``) and return its exit code."""
+    if p.poll() is None:
+        p.send_signal(sig)
+        try:
+            p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+    return p.returncode
+
+
+@contextmanager
+def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep", log: Path | None = None,
+                 max_ticks: int | None = None, hold_after: float | None = None,
+                 servo_off_after: float | None = None, timeout: float = 20.0):
+    """A FakeRobot served over Zenoh in a subprocess; killed on exit whatever happens."""
+    ready = tmp / f"ready-{port}"
+    args = [sys.executable, "-m", "servotau.hal", "--robot", "fake_robot:FakeRobot",
+            "--kwargs", json.dumps({"seed": seed}), "--listen", endpoint(port), "--clock", clock,
+            "--ready-file", str(ready)]
+    if log is not None:
+        args += ["--log", str(log)]
+    if max_ticks is not None:
+        args += ["--max-ticks", str(max_ticks)]
+    if hold_after is not None:
+        args += ["--hold-after", str(hold_after)]
+    if servo_off_after is not None:
+        args += ["--servo-off-after", str(servo_off_after)]
+    out = open(tmp / f"server-{port}.log", "w")
+    p = subprocess.Popen(args, env=ENV, stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+    try:
+        deadline = time.monotonic() + timeout
+        while not ready.exists():
+            if p.poll() is not None:
+                raise RuntimeError(f"robot server exited with {p.returncode}: "
+                                   f"{(tmp / f'server-{port}.log').read_text()}")
+            if time.monotonic() > deadline:
+                raise TimeoutError("robot server not ready")
+            time.sleep(0.01)
+        yield p
+    finally:
+        stop_process(p)
+        out.close()
+
+
+def controller(port: int, *args: str) -> subprocess.Popen:
+    """tests/hal_controller.py in a subprocess (stdout and stderr piped)."""
+    return subprocess.Popen([sys.executable, str(TESTS / "hal_controller.py"), "--connect", endpoint(port), *args],
+                            env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_die_with_parent)

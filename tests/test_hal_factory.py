@@ -1,0 +1,83 @@
+"""open_backend: one line of config picks the backend; config errors name file, field and choices."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+from fake_robot import FakeRobot
+
+from servotau.config import CONFIG_DIR, load_toml
+from servotau.errors import ConfigError, HalTimeoutError
+from servotau.hal import (
+    InProcessBackend,
+    LogWriter,
+    ReplayBackend,
+    import_object,
+    open_backend,
+    overrides_from_args,
+    server_config,
+)
+
+
+def _write(tmp_path, text: str):
+    p = tmp_path / "hal.toml"
+    p.write_text(text)
+    return p
+
+
+def test_unknown_backend_names_file_field_and_choices(tmp_path):
+    """backend = "ros" fails with the file, the field and the valid choices."""
+    p = _write(tmp_path, '[hal]\nbackend = "ros"\n')
+    with pytest.raises(ConfigError, match=r"hal.toml: field 'hal.backend' = 'ros': expected one of "
+                                          r"\['zenoh', 'inprocess', 'replay'\]"):
+        open_backend(p)
+
+
+def test_inprocess_and_replay_from_config(tmp_path):
+    """inprocess builds the robot from an import string (+ kwargs); replay opens a log."""
+    p = _write(tmp_path, '[hal]\nbackend = "inprocess"\n[hal.inprocess]\nrobot = "fake_robot:FakeRobot"\n'
+                         "[hal.inprocess.kwargs]\nseed = 3\n[hal.safety]\nhold_after = 0.02\n")
+    with open_backend(p) as b:
+        assert isinstance(b, InProcessBackend) and b.firmware.safety.hold_after == 0.02
+        assert b.read().seq == 0
+    log = tmp_path / "x.parquet"
+    robot = FakeRobot()
+    with LogWriter(log, robot.info) as w:
+        w.append(robot.read())
+    with open_backend(load_toml(_write(tmp_path, f'backend = "replay"\n[replay]\nlog = "{log}"\n'))) as b:
+        assert isinstance(b, ReplayBackend) and len(b) == 1
+
+
+def test_bad_options_name_the_field(tmp_path):
+    """A bad import string, a typo'd key or a bad timeout is reported with its field."""
+    cases = {
+        '[inprocess]\nrobot = "nowhere:Robot"': "field 'inprocess.robot' = 'nowhere:Robot'",
+        '[zenoh]\nconect = ["tcp/127.0.0.1:1"]': "field 'zenoh.conect'",
+        '[zenoh]\nframe_timeout = -1': "field 'zenoh.frame_timeout' = -1",
+        '[replay]\nlog = "missing.parquet"': "field 'replay.log' = 'missing.parquet': expected an existing log",
+    }
+    for body, match in cases.items():
+        backend = body.split("]")[0].strip("[")
+        with pytest.raises(ConfigError, match=match):
+            open_backend(_write(tmp_path, f'backend = "{backend}"\n{body}\n'))
+
+
+def test_defaults_file_and_server_config():
+    """config/hal.toml is valid: server side and safety settings parse."""
+    cfg = server_config(CONFIG_DIR / "hal.toml")
+    assert cfg.clock == "lockstep" and cfg.listen == ("tcp/127.0.0.1:7447",) and cfg.safety.hold_after > 0
+    assert import_object("servotau.hal.log:LogWriter") is LogWriter
+
+
+def test_command_line_overrides(tmp_path):
+    """--backend replaces the config's choice (still validated); --port replaces the zenoh endpoint."""
+    p = _write(tmp_path, '[hal]\nbackend = "zenoh"\n[hal.zenoh]\nconnect_timeout = 0.2\n'
+                         '[hal.inprocess]\nrobot = "fake_robot:FakeRobot"\n')
+    with open_backend(p, backend="inprocess") as b:
+        assert isinstance(b, InProcessBackend)
+    with pytest.raises(ConfigError, match=r"with --backend\): field 'hal.backend' = 'ros'"):
+        open_backend(p, backend="ros")
+    with pytest.raises(HalTimeoutError, match="tcp/127.0.0.1:9"):
+        open_backend(p, port=9)
+    assert overrides_from_args(argparse.Namespace(backend=None, port=7448, mode="x")) == {"port": 7448}

@@ -1,0 +1,99 @@
+"""Robot-side firmware: watchdog hold then latched servo off, |q_des - q| trip, clamping, counters."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+from fake_robot import FakeRobot
+
+from servotau.config import Section
+from servotau.errors import ConfigError, HalError
+from servotau.hal import Firmware, FirmwareState, SafetyConfig
+
+INFO = FakeRobot().info
+Q = np.zeros(INFO.nq)
+
+
+def test_waits_holding_the_first_position_without_timeout():
+    """Before any command the robot holds its first measured position, however long it waits."""
+    fw = Firmware(INFO, SafetyConfig(hold_after=0.01, servo_off_after=0.02))
+    q0 = np.full(INFO.nq, 0.05)
+    np.testing.assert_array_equal(fw.output(q0, 0.0), q0)
+    np.testing.assert_array_equal(fw.output(q0 + 0.01, 100.0), q0)
+    assert fw.state == FirmwareState.WAITING
+
+
+def test_watchdog_holds_then_cuts_servos_latched():
+    """No fresh command: hold the measured position after hold_after, servo off after servo_off_after."""
+    fw = Firmware(INFO, SafetyConfig(hold_after=0.05, servo_off_after=0.2))
+    fw.accept(Q + 0.02, 0.0)
+    np.testing.assert_array_equal(fw.output(Q, 0.04), Q + 0.02)
+    held = fw.output(Q + 0.01, 0.06)  # measured position at the trip
+    assert fw.state == FirmwareState.HOLDING and fw.counters["holds"] == 1
+    np.testing.assert_array_equal(held, Q + 0.01)
+    np.testing.assert_array_equal(fw.output(Q + 0.015, 0.1), Q + 0.01)
+    assert fw.output(Q, 0.21) is None and fw.state == FirmwareState.SERVO_OFF
+    fw.accept(Q, 0.22)  # latched: a late command changes nothing
+    assert fw.output(Q, 0.23) is None and fw.counters["commands_after_servo_off"] == 1
+    assert "no fresh command" in fw.servo_off_reason
+
+
+def test_fresh_command_resumes_from_hold_and_controller_loss_holds_at_once():
+    """A fresh command ends a hold; a vanished controller token holds at the next tick."""
+    fw = Firmware(INFO, SafetyConfig(hold_after=0.05, servo_off_after=1.0))
+    fw.accept(Q, 0.0)
+    fw.output(Q, 0.1)
+    assert fw.state == FirmwareState.HOLDING
+    fw.accept(Q + 0.01, 0.2)
+    np.testing.assert_array_equal(fw.output(Q, 0.2), Q + 0.01)
+    fw.controller_lost()
+    fw.output(Q + 0.003, 0.201)
+    assert fw.state == FirmwareState.HOLDING
+
+
+def test_position_error_trips_servo_off():
+    """|q_des - q| beyond max_position_error on one joint cuts the servos (latched), naming the joint."""
+    fw = Firmware(INFO)
+    q_des = Q.copy()
+    q_des[4] = INFO.max_position_error + 0.01
+    fw.accept(q_des, 0.0)
+    assert fw.output(Q, 0.0) is None
+    assert 'joint "J04"' in fw.servo_off_reason and fw.state == FirmwareState.SERVO_OFF
+    fw.accept(Q, 0.001)
+    assert fw.output(Q, 0.001) is None
+
+
+def test_clamps_to_joint_limits_with_rate_limited_warning(caplog):
+    """Commands beyond the joint limits are clamped; the warning is rate limited."""
+    fw = Firmware(INFO, SafetyConfig(max_position_error=10.0, warn_interval=60.0))
+    q_des = Q.copy()
+    q_des[1] = 3.0
+    with caplog.at_level(logging.WARNING, logger="servotau.hal.firmware"):
+        for k in range(100):
+            fw.accept(q_des, k * 1e-3)
+            out = fw.output(Q, k * 1e-3)
+    assert out[1] == INFO.q_max[1] and fw.counters["clamped_ticks"] == 100 and fw.clamped
+    assert len([r for r in caplog.records if "clamped" in r.message]) == 1
+
+
+def test_reject_counts_and_rate_limits(caplog):
+    """Rejected commands are counted one by one and logged at a limited rate."""
+    fw = Firmware(INFO, SafetyConfig(warn_interval=60.0))
+    with caplog.at_level(logging.WARNING, logger="servotau.hal.firmware"):
+        for _ in range(1000):
+            fw.reject("bad")
+        fw.reject("old", version=True)
+    assert fw.counters["commands_rejected"] == 1001 and fw.counters["commands_rejected_version"] == 1
+    assert len(caplog.records) == 1
+
+
+def test_safety_config_validation():
+    """Bad safety settings are refused; from_section names the file and the field."""
+    with pytest.raises(HalError, match="servo_off_after"):
+        SafetyConfig(hold_after=0.1, servo_off_after=0.05)
+    with pytest.raises(ConfigError, match="hal.toml: field 'safety.hold_after' = -1"):
+        SafetyConfig.from_section(Section({"hold_after": -1}, "hal.toml", "safety"))
+    s = SafetyConfig.from_section(Section({"hold_after": 0.02, "max_position_error": 0.2}, "x.toml", ""))
+    assert s.hold_after == 0.02 and s.max_position_error == 0.2 and s.servo_off_after == 1.0
