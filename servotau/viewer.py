@@ -88,6 +88,11 @@ class RerunStream:
         self._model = mujoco.MjModel.from_xml_path(model_path)
         self._data = mujoco.MjData(self._model)
         m = self._model
+        model_joints = {m.joint(i).name for i in range(m.njnt)}
+        unknown = [j for j in self.joint_names if j not in model_joints]
+        if unknown:
+            raise ConfigError(f"{model_path}: joints {unknown} are not in the model: expected names among "
+                              f"{sorted(model_joints)}")
         self._qadr = np.array([m.joint(j).qposadr[0] for j in self.joint_names])
         self._boxes = np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_BOX)
         self._caps = np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_CAPSULE)
