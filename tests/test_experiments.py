@@ -1,0 +1,87 @@
+"""Smoke tests of the paper's experiments (control/experiments.py): short runs, every output written."""
+
+import json
+
+import numpy as np
+import pytest
+
+from servotau.cli import main as cli_main
+from servotau.control import experiments as ex
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory):
+    """Quick motion runs (position, K6 = 1, 0.1) and a 2-period force run, then every experiment's outputs."""
+    out = tmp_path_factory.mktemp("experiments")
+    runs = ex.motion_runs(quick=True, out=out)
+    force = ex.force_run(quick=True, out=out)
+    summaries = {
+        "motion": ex.run_motion(out, quick=True, runs=runs),
+        "force": ex.run_force(out, quick=True, run=force),
+        "components": ex.run_components(out, quick=True, runs={"motion K6=1": runs["K6=1"],
+                                                                "motion K6=0.1": runs["K6=0.1"], "force": force}),
+        "estimation": ex.run_estimation(out, quick=True, run=runs["K6=1"]),
+    }
+    doc = ex.write_results(out, out / "results.md")
+    return out, summaries, doc
+
+
+def test_motion_writes_tables_and_figure_with_finite_errors(outputs):
+    """The motion experiment writes the mean/max tables (CSV, Markdown), Fig. 4 and finite per-joint errors."""
+    out, s, _ = outputs
+    m = s["motion"]
+    assert m["controllers"] == ["position", "K6=1", "K6=0.1"]
+    for name in ("motion_mean_mrad.csv", "motion_mean_mrad.md", "motion_max_mrad.csv", "fig4_motion_errors.png"):
+        assert (out / "motion" / name).stat().st_size > 0
+    for name in m["controllers"]:
+        assert np.all(np.isfinite(m["mean_mrad"][name])) and len(m["mean_mrad"][name]) == 6
+        assert np.all(np.asarray(m["max_mrad"][name]) >= np.asarray(m["mean_mrad"][name]))
+    assert json.loads((out / "motion" / "summary.json").read_text())["controllers"] == m["controllers"]
+
+
+def test_force_reports_overshoot_coupling_and_delay(outputs):
+    """The force experiment tracks a sinusoid on f_z without a trip and reports its metrics for both sources."""
+    out, s, _ = outputs
+    f = s["force"]
+    assert f["tripped"] is None
+    for source in ("measured", "true"):
+        metrics = f["metrics"][source]
+        for key in ("overshoot_pct", "coupling_x_pct", "coupling_y_pct", "delay_ms", "amplitude_ratio"):
+            assert np.isfinite(metrics[key]), (source, key)
+    assert abs(f["metrics"]["measured"]["delay_ms"]) <= 200.0
+    assert (out / "force" / "fig5_force_tracking.png").stat().st_size > 0
+
+
+def test_component_shares_sum_to_one_hundred_percent(outputs):
+    """The six paper components' RMS shares sum to 100 % on every joint of every run."""
+    out, s, _ = outputs
+    for name, shares in s["components"]["shares_pct"].items():
+        total = sum(np.asarray(shares[c]) for c in ex.PAPER_COMPONENTS)
+        np.testing.assert_allclose(total, 100.0, rtol=1e-9, err_msg=name)
+    assert (out / "components" / "fig6_components.png").stat().st_size > 0
+
+
+def test_estimation_error_is_small_relative_to_the_peak(outputs):
+    """The estimated torques of the motion run are finite, with an RMS error below the peak torque per joint."""
+    _, s, _ = outputs
+    rms, peak = np.asarray(s["estimation"]["rms_Nm"]), np.asarray(s["estimation"]["peak_Nm"])
+    assert np.all(np.isfinite(rms)) and np.all(rms < peak)
+
+
+def test_results_document_has_every_section_and_the_paper_tables(outputs):
+    """The generated results document covers the four experiments and quotes the paper's Tables 2 and 3."""
+    _, _, doc = outputs
+    for title in ("## Motion control", "## Force control", "## Control components", "## Torque estimation"):
+        assert title in doc
+    assert "Not run." not in doc
+    assert "61.86" in doc and "0.115" in doc  # position control knee, Tables 3 and 2
+
+
+def test_cli_runs_an_experiment_and_writes_the_document(tmp_path, capsys):
+    """`servotau experiment estimation --quick` exits 0, prints its table and writes the document."""
+    doc = tmp_path / "results.md"
+    code = cli_main(["experiment", "estimation", "--quick", "--out", str(tmp_path / "runs"), "--doc", str(doc)])
+    assert code == 0
+    assert "RMS / peak" in capsys.readouterr().out
+    text = doc.read_text()
+    assert "## Torque estimation" in text and "Not run." in text  # the others were not run in this directory
