@@ -1,0 +1,160 @@
+"""``servotau identify``: collect actuator-identification data on a robot, fit the motor parameters.
+
+::
+
+    servotau identify collect --out runs/ident.parquet [--hal hal.toml --backend inprocess|zenoh --port N]
+                              [--plan identification.toml] [--joints RLEG_JOINT0,...] [--sim-config ...]
+    servotau identify fit runs/ident.parquet [--joints ...] [--loss asymmetric|least_squares] [--w 100]
+                          [--two-stage] [--out config/motors/identified.toml] [--json]
+
+``collect`` plays the plan (settle, high-velocity sweeps, high-torque holds; paper section 3.4) on any
+HAL backend and writes the project's Parquet log; on the inprocess backend the simulated robot is
+built from ``--sim-config`` (default ``config/sim_identification.toml``: the hanging robot whose
+scripted operator pushes the right foot during the plan's holds). ``fit`` estimates dq and tau
+off-line from the log's sensors (non-causal, centred filters; never the ground truth), fits every
+joint and writes the motor-parameter file that ``control/`` reads. See docs/identification.md.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from servotau.config import Section
+from servotau.errors import IdentificationError
+
+DEFAULT_SIM_CONFIG = "sim_identification.toml"
+DEFAULT_MOTORS = "config/motors/identified.toml"  # in the repository (control.toml: motors = "motors/identified.toml")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("identify", help="actuator identification: collect data, fit k_tau and k_v (paper sec. 3)")
+    cmds = p.add_subparsers(dest="identify_command", required=True, metavar="STEP")
+
+    c = cmds.add_parser("collect", help="run the collection plan on a HAL backend and record a Parquet log")
+    c.add_argument("--out", required=True, help="Parquet log to write")
+    c.add_argument("--hal", default="hal.toml", help="HAL config: [hal] backend = zenoh | inprocess")
+    c.add_argument("--backend", choices=("inprocess", "zenoh"), help="override the config's backend")
+    c.add_argument("--port", type=int, help="zenoh: the robot's port on 127.0.0.1 (overrides the config)")
+    c.add_argument("--plan", default="identification.toml", help="collection plan (default config/identification.toml)")
+    c.add_argument("--joints", help="comma-separated joints to sweep (default: the plan's)")
+    c.add_argument("--sim-config", default=DEFAULT_SIM_CONFIG,
+                   help="inprocess only: simulation config (scenario with the scripted operator)")
+    c.add_argument("--ignore-timing", action="store_true",
+                   help="inprocess only: run even if the scenario's pushes miss the plan's hold windows")
+    c.set_defaults(func=collect_main)
+
+    f = cmds.add_parser("fit", help="fit the actuator model of each joint on a collected log")
+    f.add_argument("log", help="Parquet log from `servotau identify collect` (or any log with q_des)")
+    f.add_argument("--joints", help="comma-separated joints to fit (default: the swept joints of the log)")
+    f.add_argument("--plan", default="identification.toml", help="plan file whose [fit] table gives the defaults")
+    f.add_argument("--loss", choices=("asymmetric", "least_squares"), help="loss of the written fit")
+    f.add_argument("--w", type=float, help="over-estimation weight of the asymmetric loss (default: plan, 100)")
+    f.add_argument("--two-stage", action="store_true", help="write the two-stage fit (k_tau static, then k_v)")
+    f.add_argument("--coulomb", action="store_true", help="also fit k_c sign(dq) in the written fit")
+    f.add_argument("--downsample", type=int, help="keep every n-th valid sample (default: plan)")
+    f.add_argument("--out", default=DEFAULT_MOTORS, help=f"motor-parameter file to write (default {DEFAULT_MOTORS})")
+    f.add_argument("--no-write", action="store_true", help="do not write the motor file")
+    f.add_argument("--json", action="store_true", help="print one JSON object with the per-joint results")
+    f.set_defaults(func=fit_main)
+
+
+# -- collect ------------------------------------------------------------------------------------------------
+def hal_for_collection(hal: str, backend: str | None, sim_config: str) -> tuple[Section, str]:
+    """The ``[hal]`` section of ``hal`` with the inprocess robot built from ``sim_config`` (the HAL's
+    inprocess factory takes a sim config path as its ``scenario``), and the backend name."""
+    from servotau.hal.factory import hal_section
+
+    s = hal_section(hal)
+    name = backend or s.str("backend", choices=("zenoh", "inprocess", "replay"))
+    if name == "replay":
+        raise IdentificationError(f"{s.file}: backend = \"replay\": expected a live robot (inprocess or zenoh) "
+                                  "to collect on; pass --backend inprocess|zenoh")
+    if name == "inprocess":
+        from servotau.config import resolve_config_path
+
+        resolve_config_path(sim_config)  # a clear error now if it does not exist
+        inproc = dict(s.data.get("inprocess", {}))
+        inproc["scenario"] = sim_config
+        s = Section({**s.data, "backend": name, "inprocess": inproc}, f"{s.file} (with --sim-config)", s.prefix)
+    return s, name
+
+
+def collect_main(args) -> int:
+    from servotau.hal.factory import open_backend
+
+    from .operator_script import check_timing
+    from .plan import check_joints, load_plan, parse_joints
+    from .session import run_collection
+
+    plan, _ = load_plan(args.plan)
+    section, name = hal_for_collection(args.hal, args.backend, args.sim_config)
+    joints = parse_joints(args.joints)
+    backend = open_backend(section, backend=name, port=args.port)
+    with backend:
+        if joints is not None:
+            check_joints(joints, backend.info.joint_names, "--joints")
+            plan = plan.with_joints(joints)
+        else:
+            check_joints(plan.joints, backend.info.joint_names, f"{plan.source}: [collect] joints")
+        robot = getattr(backend, "robot", None)
+        scenario = getattr(getattr(robot, "config", None), "scenario", None)
+        if scenario is not None:
+            problems = check_timing(plan, scenario.operator, backend.info.period)
+            if problems:
+                msg = (f"scenario '{scenario.name}' of {args.sim_config} does not match the plan {plan.source}: "
+                       + "; ".join(problems[:3]) + " (expected pushes inside the hold windows: see "
+                       "docs/identification.md, or --ignore-timing)")
+                if not args.ignore_timing:
+                    raise IdentificationError(msg)
+                print(f"servotau identify collect: warning: {msg}", file=sys.stderr)
+        meta = {"servotau.identification.hal": str(section.file)}
+        if name == "inprocess":
+            meta["servotau.identification.sim_config"] = args.sim_config
+        result = run_collection(backend, plan, args.out, source=name, metadata=meta,
+                                progress=lambda m: print(m, flush=True))
+    print(f"wrote {args.out}: {result.rows} ticks, {result.robot_seconds:.1f} s robot time in "
+          f"{result.wall_seconds:.1f} s wall" + (" (with ground truth, for evaluation only)" if result.truth else ""))
+    return 0
+
+
+# -- fit ------------------------------------------------------------------------------------------------
+def fit_main(args) -> int:
+    from dataclasses import replace
+
+    from .loss import Loss
+    from .pipeline import fit_log, write_motor_file
+    from .plan import load_plan, parse_joints
+
+    _, settings = load_plan(args.plan)
+    if args.w is not None and (args.loss or settings.loss.kind) == "least_squares":
+        raise IdentificationError(f"--w {args.w}: expected no weight with the least-squares loss")
+    kind = args.loss or settings.loss.kind
+    w = args.w if args.w is not None else (settings.loss.w or 100.0)
+    loss = Loss.asymmetric(w) if kind == "asymmetric" else Loss.least_squares()
+    changes = {"loss": loss}
+    if args.two_stage:
+        changes["two_stage"] = True
+    if args.coulomb:
+        changes["coulomb"] = True
+    if args.downsample is not None:
+        changes["downsample"] = args.downsample
+    settings = replace(settings, **changes)
+    report = fit_log(args.log, joints=parse_joints(args.joints), settings=settings,
+                     progress=(lambda m: print(m, file=sys.stderr)) if args.json else print)
+    if not args.no_write:
+        from servotau.config import REPO_ROOT
+
+        try:
+            path = write_motor_file(report, REPO_ROOT / DEFAULT_MOTORS if args.out == DEFAULT_MOTORS else args.out)
+        except IdentificationError:
+            print(json.dumps(report.to_dict()) if args.json else report.table())  # the fits, then the error
+            raise
+        report = replace(report, motor_file=str(path))
+    if args.json:
+        print(json.dumps(report.to_dict()))
+    else:
+        print(report.table())
+        if report.motor_file:
+            print(f"wrote {report.motor_file}")
+    return 0
