@@ -16,6 +16,8 @@ from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
 INFO = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
 with open(CONFIG_DIR / "control.toml", "rb") as _f:
     BASE = tomllib.load(_f)
+with open(CONFIG_DIR / BASE["motors"], "rb") as _f:
+    K_TAU = {j: m["k_tau"] for j, m in tomllib.load(_f)["joints"].items()}  # the shipped motor file's values
 
 
 def _with(path: str, value):
@@ -39,9 +41,9 @@ def test_shipped_config_loads_with_k6_converted_to_stiffness():
     assert cfg.torque_mask.sum() == 6 and cfg.torque_mask[:6].all()
     g = cfg.gains["RLEG_JOINT3"]
     k6 = BASE["defaults"]["k6"]
-    assert g.k_s == pytest.approx(k6 / (5.1e-5 * (1.0 + g.k_p)))
+    assert g.k_s == pytest.approx(k6 / (K_TAU["RLEG_JOINT3"] * (1.0 + g.k_p)))
     assert cfg.joint_vector("k_s")[6:].tolist() == [0.0] * 24
-    assert cfg.motor_vector("k_tau")[3] == 5.1e-5
+    assert cfg.motor_vector("k_tau")[3] == K_TAU["RLEG_JOINT3"]
 
 
 def test_joint_table_overrides_defaults_in_either_unit():
@@ -50,7 +52,7 @@ def test_joint_table_overrides_defaults_in_either_unit():
     cfg = ControlConfig.from_mapping(data, INFO)
     assert cfg.gains["RLEG_JOINT3"].k_s == 1234.0
     assert cfg.gains["RLEG_JOINT3"].k_p == 2.0
-    assert cfg.gains["RLEG_JOINT2"].k_s == pytest.approx(0.5 / (1.2e-4 * 3.0))
+    assert cfg.gains["RLEG_JOINT2"].k_s == pytest.approx(0.5 / (K_TAU["RLEG_JOINT2"] * 3.0))
 
 
 @pytest.mark.parametrize("path, value, field, expected", [
