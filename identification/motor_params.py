@@ -159,14 +159,41 @@ class MotorModel:
             metrics=FitMetrics(fit.rms, fit.overestimation_rate, fit.n_samples),
         )
 
-    def predict(self, tau: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """``k_tau tau + k_v dq [+ k_c sign(dq)]`` [rad]; refuses models with extra terms (their regressors
-        are defined by whoever fitted them)."""
+    def predict(
+        self,
+        tau: np.ndarray,
+        dq: np.ndarray,
+        *,
+        q: np.ndarray | None = None,
+        q_des: np.ndarray | None = None,
+        t: np.ndarray | None = None,
+        ddq: np.ndarray | None = None,
+        period: float | None = None,
+    ) -> np.ndarray:
+        """``k_tau tau + k_v dq [+ k_c sign(dq)] [+ extra terms]`` [rad] on arrays of samples.
+
+        Extra terms are evaluated by the effect registry of the model workbench
+        (:mod:`servotau.identification.workbench.online`); the signals they need (``q``, ``q_des``, the
+        time ``t`` or ``period``, the acceleration ``ddq``) must then be given. For one tick at a time
+        with the state of effects with memory, use :meth:`online`.
+
+        Raises:
+            IdentificationError: An extra term is unknown or needs a signal that was not given.
+        """
         if self.extra:
-            raise IdentificationError(f"extra terms {list(self.extra)}: predict() handles the linear model only")
+            from .workbench.online import predict_batch  # the registry lives in the workbench
+
+            return predict_batch(self, tau, dq, q=q, q_des=q_des, t=t, ddq=ddq, period=period)
         tau = np.asarray(tau, dtype=np.float64)
         dq = np.asarray(dq, dtype=np.float64)
         return self.k_tau * tau + self.k_v * dq + (self.k_c or 0.0) * sign(dq)
+
+    def online(self, period: float):
+        """An :class:`~servotau.identification.workbench.online.OnlineModel`: this model one control tick
+        at a time (``step(tau, dq, q=..., q_des=..., t=..., ddq=...)``), effects with memory included."""
+        from .workbench.online import OnlineModel
+
+        return OnlineModel(self, period)
 
 
 @dataclass(frozen=True)

@@ -1,1 +1,59 @@
-"""Model workbench: compare the actuator model with measurements, diagnose, add effects."""
+"""Model workbench: compare the actuator model with measurements, see where it fails, name the missing
+physical effect, add it and watch the held-out error fall (docs/workbench.md).
+
+Plotting (:mod:`.report`), Rerun (:mod:`.rerun_view`) and the simulator (:mod:`.simlog`) are imported
+only when used.
+"""
+
+from . import library as _library  # noqa: F401  (registers the built-in effects)
+from .data import Dataset, align_torque, load_dataset, write_table
+from .diagnose import MIN_GAIN, Candidate, Confusion, Diagnosis, diagnose
+from .effects import Effect, OnlineTerm, effect_names, get_effect, register_effect, unregister_effect
+from .evaluate import Comparison, Metrics, blocked_folds, compare, folds_of
+from .excitation import Excitation, excitation_report
+from .ladder import Ladder, Rung, add_effects, save_model
+from .model import FittedModel, ModelSpec, Term, fit_spec, parse_spec, resolve_shapes
+from .online import ONLINE_SIGNALS, OnlineModel, predict_batch
+from .signals import Signals
+from .views import ResidualViews, residual_views
+
+__all__ = [
+    "MIN_GAIN",
+    "ONLINE_SIGNALS",
+    "Candidate",
+    "Comparison",
+    "Confusion",
+    "Dataset",
+    "Diagnosis",
+    "Effect",
+    "Excitation",
+    "FittedModel",
+    "Ladder",
+    "Metrics",
+    "ModelSpec",
+    "OnlineModel",
+    "OnlineTerm",
+    "ResidualViews",
+    "Rung",
+    "Signals",
+    "Term",
+    "add_effects",
+    "align_torque",
+    "blocked_folds",
+    "compare",
+    "diagnose",
+    "effect_names",
+    "excitation_report",
+    "fit_spec",
+    "folds_of",
+    "get_effect",
+    "load_dataset",
+    "parse_spec",
+    "predict_batch",
+    "register_effect",
+    "residual_views",
+    "resolve_shapes",
+    "save_model",
+    "unregister_effect",
+    "write_table",
+]

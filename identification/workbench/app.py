@@ -1,0 +1,275 @@
+"""``servotau model compare|diagnose|add``: the model workbench on the command line.
+
+::
+
+    servotau model compare  LOG [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
+    servotau model diagnose LOG [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
+    servotau model add      LOG [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml]
+    servotau model simulate OUT.parquet [--hidden EFFECT ...] [--cycles 4] [--seed 0]
+
+Common options: ``--map ROLE=COLUMN`` (column roles for other tables), ``--loss least_squares|asymmetric``
+with ``--w``, ``--folds``, ``--plugin FILE.py`` (registers user effects), ``--report DIR`` (HTML + PNG),
+``--rerun save:FILE|connect:ADDR|spawn``, ``--json`` (one JSON object on stdout). Progress goes to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import runpy
+import sys
+import time
+from pathlib import Path
+
+from servotau.errors import IdentificationError
+
+from ..loss import Loss
+from . import library as _library  # noqa: F401  (registers the built-in effects)
+from .data import ROLES, align_torque, describe, load_dataset
+from .diagnose import MIN_GAIN, diagnose
+from .effects import effect_names
+from .evaluate import DEFAULT_FOLDS, compare, folds_of
+from .ladder import add_effects, save_model
+from .model import FittedModel, parse_spec
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("model", help="model workbench: compare, diagnose, add effects",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="model_command", required=True, metavar="SUBCOMMAND")
+    for name, text in (("compare", "model against measurement, residual views"),
+                       ("diagnose", "rank the missing effects by held-out gain"),
+                       ("add", "add effects (named, or greedily) and show the ladder")):
+        sp = sub.add_parser(name, help=text)
+        _common(sp)
+        if name == "compare":
+            sp.add_argument("--model", metavar="TOML", help="evaluate this motor-parameter file (no refit)")
+        if name in ("diagnose", "add"):
+            sp.add_argument("--effects", metavar="A,B", help="effects to rank (default: all registered)")
+            sp.add_argument("--min-gain", type=float, default=MIN_GAIN, help="held-out gain that names an effect")
+        if name == "add":
+            sp.add_argument("--effect", action="append", metavar="NAME",
+                            help="add this effect (repeatable, in order); default: greedy by diagnosis")
+            sp.add_argument("--max-steps", type=int, default=4, help="most effects the greedy search adds")
+            sp.add_argument("--save", metavar="TOML", help="write the final model into this motor-parameter file")
+        sp.set_defaults(func=run)
+    sim = sub.add_parser("simulate", help="a log of the simulated HRP-2 with hidden effects (to try the workbench)")
+    sim.add_argument("out", help="output table (.parquet or .csv)")
+    sim.add_argument("--hidden", action="append", default=[], metavar="EFFECT",
+                     help="hidden effect of the simulator (simrobot/servo_config.py EFFECT_PARAMS), repeatable")
+    sim.add_argument("--joint", default="RLEG_JOINT3")
+    sim.add_argument("--cycles", type=int, default=4, help="excitation cycles of 4 s")
+    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--quiet", action="store_true")
+    sim.set_defaults(func=run_simulate)
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    from servotau.simrobot.servo import EFFECTS
+
+    from .data import write_table
+    from .simlog import ExcitationPlan, simulate_log
+
+    unknown = [e for e in args.hidden if e not in EFFECTS]
+    if unknown:
+        raise IdentificationError(f"--hidden: unknown simulator effect(s) {unknown}: expected some of {list(EFFECTS)}")
+    if args.cycles < 1:
+        raise IdentificationError(f"--cycles {args.cycles}: expected at least 1")
+    say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    cols = simulate_log({e: {} for e in args.hidden}, joint=args.joint, plan=ExcitationPlan(cycles=args.cycles),
+                        seed=args.seed, progress=say)
+    path = write_table(cols, args.out)
+    print(f"{path}: {len(cols['t'])} rows, hidden effects {args.hidden or 'none'} on {args.joint}")
+    return 0
+
+
+def _common(sp: argparse.ArgumentParser) -> None:
+    sp.add_argument("log", help="log table (.parquet or .csv)")
+    sp.add_argument("--joint", help="joint of a servotau log (q/<joint>, q_des/<joint>, est/tau/<joint>)")
+    sp.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
+                    help=f"column of a role, one of {', '.join(ROLES)} (repeatable)")
+    sp.add_argument("--base", default="paper", help="base model: paper (k_tau, k_v), coulomb, or effects joined by +")
+    sp.add_argument("--loss", default="least_squares", choices=("least_squares", "asymmetric"))
+    sp.add_argument("--w", type=float, default=10.0, help="over-estimation weight of the asymmetric loss")
+    sp.add_argument("--folds", type=int, default=DEFAULT_FOLDS, help="held-out blocks (or the log's segments)")
+    sp.add_argument("--align-torque", type=float, default=0.0, metavar="S",
+                    help="re-time the torque against the encoders, searching +/- S seconds (0: off)")
+    sp.add_argument("--plugin", action="append", default=[], metavar="FILE.py",
+                    help="Python file that registers user effects (register_effect)")
+    sp.add_argument("--report", metavar="DIR", help="write an HTML report with PNG plots into DIR")
+    sp.add_argument("--rerun", metavar="TARGET", help="save:FILE, connect:ADDR or spawn")
+    sp.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def _roles(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        role, sep, col = item.partition("=")
+        if not sep or not role or not col:
+            raise IdentificationError(f"--map {item!r}: expected ROLE=COLUMN with ROLE one of {list(ROLES)}")
+        out[role.strip()] = col.strip()
+    return out
+
+
+def _plugins(paths: list[str]) -> None:
+    for p in paths:
+        if not Path(p).is_file():
+            raise IdentificationError(f"--plugin {p}: file not found: expected a Python file calling register_effect")
+        try:
+            runpy.run_path(p, run_name="servotau_workbench_plugin")
+        except IdentificationError:
+            raise
+        except Exception as exc:
+            raise IdentificationError(f"--plugin {p}: failed ({type(exc).__name__}: {exc})") from exc
+
+
+def run(args: argparse.Namespace) -> int:
+    start = time.perf_counter()
+
+    def say(msg: str) -> None:
+        if not args.quiet:
+            print(f"[{time.perf_counter() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    _plugins(args.plugin)
+    if args.folds < 2:
+        raise IdentificationError(f"--folds {args.folds}: expected at least 2")
+    loss = Loss.asymmetric(args.w) if args.loss == "asymmetric" else Loss.least_squares()
+    say(f"reading {args.log}")
+    ds = load_dataset(args.log, joint=args.joint, roles=_roles(args.map))
+    if args.align_torque > 0:
+        ds, shift = align_torque(ds, args.align_torque)
+        say(f"torque re-timed by {1e3 * shift:.0f} ms")
+    for line in describe(ds):
+        say(line)
+    spec = parse_spec(args.base, ds.signals)
+    folds = folds_of(ds, args.folds)
+    effects = None
+    if getattr(args, "effects", None):
+        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+        unknown = [e for e in effects if e not in effect_names()]
+        if unknown:
+            raise IdentificationError(f"--effects: unknown effect(s) {unknown}: expected names among {effect_names()}")
+    out: dict = {"command": args.model_command, "data": {"source": ds.source, "joint": ds.joint, "n": ds.n,
+                                                         "dropped_rows": ds.n_dropped, "notes": list(ds.notes)}}
+    comparison = diagnosis = ladder = None
+    if args.model_command == "compare":
+        if args.model:
+            from ..motor_params import MotorParameters
+
+            params = MotorParameters.load_toml(args.model)
+            joint = ds.joint or (next(iter(params)) if len(params) == 1 else None)
+            if joint is None:
+                raise IdentificationError(f"--model {args.model}: several joints {list(params)}: expected --joint")
+            given = FittedModel.from_motor_model(params[joint])
+            comparison = compare(ds, given, loss)
+            spec = given.spec
+            say(f"model {spec.label()} from {args.model}")
+        else:
+            say(f"fitting {spec.label()} ({loss})")
+            comparison = compare(ds, spec, loss, folds=folds)
+        say("ranking the missing effects")
+        diagnosis = diagnose(ds, spec, loss, folds=folds, progress=say if not args.quiet else None)
+        out.update(_comparison_dict(comparison))
+        out.update(_diagnosis_dict(diagnosis))
+    elif args.model_command == "diagnose":
+        diagnosis = diagnose(ds, spec, loss, effects=effects, folds=folds, min_gain=args.min_gain,
+                             progress=say if not args.quiet else None)
+        out.update(_comparison_dict(diagnosis.base))
+        out.update(_diagnosis_dict(diagnosis))
+    else:
+        if args.effect:
+            unknown = [e for e in args.effect if e not in effect_names()]
+            if unknown:
+                raise IdentificationError(f"--effect: unknown effect(s) {unknown}: expected one of {effect_names()}")
+        ladder = add_effects(ds, spec, loss, effects=args.effect, candidates=effects, max_steps=args.max_steps,
+                             min_gain=args.min_gain, folds=folds, progress=say if not args.quiet else None)
+        diagnosis = ladder.diagnoses[-1]
+        out.update(_comparison_dict(ladder.rungs[-1].comparison))
+        out.update(_diagnosis_dict(diagnosis))
+        out.update(ladder.to_dict())
+        if args.save:
+            joint = ds.joint or "joint"
+            path = save_model(ladder, args.save, joint, provenance=f"{ds.source}; servotau model add; {loss}")
+            out["saved"] = {"file": str(path), "joint": joint}
+            say(f"saved {ladder.final.spec.label()} to {path} [{joint}]")
+    if args.report:
+        page = _report(args.report, ds, comparison, diagnosis, ladder, out)
+        out["report"] = str(page)
+        say(f"report: {page}")
+    if args.rerun:
+        _rerun(args.rerun, ds, comparison, diagnosis, ladder)
+        out["rerun"] = args.rerun
+    if args.json:
+        print(json.dumps(out, allow_nan=False, default=_jsonable))
+    else:
+        _print_human(out, ladder)
+    return 0
+
+
+def _jsonable(x):
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return str(x)
+
+
+def _comparison_dict(c) -> dict:
+    coefs = {k: float(f"{v:.6g}") for k, v in c.model.coefficients.items()}
+    return {"model": c.model.spec.label(), "coefficients": coefs, "train": _clean(c.train.to_dict()),
+            "heldout": _clean(c.heldout.to_dict()) if c.heldout else None}
+
+
+def _diagnosis_dict(d) -> dict:
+    full = d.to_dict()
+    keep = ("verdict", "message", "min_gain", "ranking", "runner_up", "probes", "confusion", "untestable",
+            "experiments", "tail_share", "excitation")
+    out = {k: full[k] for k in keep}
+    out["diagnosed_model"] = full["model"]
+    return _clean(out)
+
+
+def _clean(x):
+    """NaN and inf to None (strict JSON)."""
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, float) and x != x or x in (float("inf"), float("-inf")):
+        return None
+    return x
+
+
+def _report(out_dir, ds, comparison, diagnosis, ladder, summary):
+    from .report import write_report
+
+    return write_report(out_dir, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder, summary=summary)
+
+
+def _rerun(target: str, ds, comparison, diagnosis, ladder) -> None:
+    from servotau.viewer import open_recording
+
+    from .rerun_view import log_to_rerun
+
+    rec = open_recording(target, app_id="servotau_model")
+    log_to_rerun(rec, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder)
+
+
+def _print_human(out: dict, ladder) -> None:
+    print(f"model {out['model']}")
+    for part in ("train", "heldout"):
+        m = out.get(part)
+        if m:
+            print(f"  {part:8s} fit {m['fit_percent']:.1f} %  RMS {1e6 * m['rms']:.2f} urad  "
+                  f"over-estimation {100 * m['overestimation_rate']:.1f} %")
+    if "verdict" in out:
+        print(f"verdict: {out['verdict']}: {out['message']}")
+        for i, c in enumerate(r for r in out["ranking"] if r["testable"]):
+            if i >= 5:
+                break
+            print(f"  {i + 1}. {c['effect']:15s} held-out gain {100 * (c['heldout_gain'] or 0):5.1f} %")
+    if ladder is not None:
+        print("ladder:")
+        for r in out["ladder"]:
+            print(f"  {r['model']:60s} train {1e6 * r['train_rms']:7.2f} urad  "
+                  f"held-out {1e6 * r['heldout_rms']:7.2f} urad")

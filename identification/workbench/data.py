@@ -1,0 +1,400 @@
+"""Load a log table (Parquet, CSV or in-memory columns) into a :class:`Dataset` for the workbench.
+
+Three layouts are recognised, in this order:
+
+1. An explicit mapping of column roles (``roles={"target": "friction", "velocity": "v"}``): any table,
+   e.g. a friction torque against velocity from another robot. Roles: ``target`` (what the model
+   predicts), or ``command`` and ``position`` (then ``target = command - position``); ``torque``,
+   ``velocity``, ``position``, ``time``, ``segment`` (held-out blocks of the cross-validation),
+   ``acceleration``.
+2. servotau's own logs (one row per tick): ``t``, ``q/<joint>``, ``q_des/<joint>``,
+   ``est/tau/<joint>`` (else ``true/tau/<joint>``), optional ``est/dq/<joint>``; pick the joint with
+   ``joint`` (optional when the log has one joint).
+3. A single-joint table: ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], optional ``dq``
+   [rad/s] and ``segment``.
+
+Then ``target = q_des - q`` [rad]. Without a velocity column, ``dq`` is the centred Savitzky-Golay
+derivative of ``q`` (window ``SG_WINDOW_S``, order 2), computed on each run of valid samples; ``ddq``
+likewise (window ``SG_WINDOW_DDQ_S``, order 3). The torque is smoothed by a centred SG filter
+(``SMOOTH_TAU_S``, order 2: no delay). Rows with NaN or inf in a used column are dropped and counted.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from servotau.errors import IdentificationError
+
+from .signals import Signals
+
+log = logging.getLogger(__name__)
+
+ROLES = ("target", "command", "position", "torque", "velocity", "acceleration", "time", "segment")
+SG_WINDOW_S = 0.041  # [s] centred SG window of the velocity (41 samples at 1 kHz)
+SG_WINDOW_DDQ_S = 0.081  # [s] centred SG window of the acceleration
+SMOOTH_TAU_S = 0.021  # [s] centred SG smoothing of the torque (21 samples at 1 kHz)
+MIN_SAMPLES = 200
+_SIGNAL_OF_ROLE = {"position": "q", "command": "q_des", "torque": "tau", "velocity": "dq", "acceleration": "ddq",
+                   "time": "t"}
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """One joint's samples, ready for fitting.
+
+    Attributes:
+        signals: :class:`Signals` (``t``, ``q``, ``q_des``, ``tau``, ``dq``, ``ddq`` where available, and
+            every numeric column of the table under its own name).
+        target: What the model predicts, ``q_des - q`` [rad] for actuator logs.
+        segment: Segment label per sample (blocks of the cross-validation), or None.
+        roles: Column used for each role.
+        source: Where the data came from (file name or "table").
+        joint: Joint name, or None.
+        n_dropped: Rows dropped for NaN or inf.
+        notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q").
+    """
+
+    signals: Signals
+    target: np.ndarray
+    segment: np.ndarray | None
+    roles: Mapping[str, str]
+    source: str
+    joint: str | None = None
+    n_dropped: int = 0
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def n(self) -> int:
+        return len(self.target)
+
+    @property
+    def dt(self) -> float | None:
+        return self.signals.dt
+
+    @property
+    def has_torque(self) -> bool:
+        return "tau" in self.signals
+
+    @property
+    def actuator(self) -> bool:
+        """The target is the paper's ``q_des - q`` (the model can be saved as a motor model)."""
+        return "command" in self.roles and "position" in self.roles
+
+    @property
+    def time(self) -> np.ndarray:
+        """Time [s], or the sample index if the table has none."""
+        return self.signals["t"] if "t" in self.signals else np.arange(self.n, dtype=np.float64)
+
+
+def read_table(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a Parquet or CSV file as float arrays (non-numeric columns are skipped)."""
+    p = Path(path)
+    if not p.exists():
+        raise IdentificationError(f"log file {p}: not found: expected a Parquet or CSV file")
+    suffix = p.suffix.lower()
+    try:
+        if suffix in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(p)
+        elif suffix in (".csv", ".txt"):
+            import pyarrow.csv as pcsv
+
+            table = pcsv.read_csv(p)
+        else:
+            raise IdentificationError(f"log file {p}: unknown format '{suffix}': expected .parquet or .csv")
+    except IdentificationError:
+        raise
+    except Exception as exc:  # pyarrow raises many types for unreadable files
+        raise IdentificationError(f"log file {p}: cannot be read ({exc}): expected a Parquet or CSV table") from exc
+    return table_columns(table)
+
+
+def table_columns(table: object) -> dict[str, np.ndarray]:
+    """Numeric columns of a pyarrow Table or a mapping of name -> array, as float64 arrays."""
+    if hasattr(table, "column_names") and hasattr(table, "column"):
+        raw = {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
+    elif isinstance(table, Mapping):
+        raw = dict(table)
+    else:
+        raise IdentificationError(f"table: got {type(table).__name__}: expected a file, a pyarrow Table or a mapping")
+    out = {}
+    for name, values in raw.items():
+        try:
+            arr = np.asarray(values, dtype=np.float64)
+        except (TypeError, ValueError):
+            continue  # text columns (labels, notes) are not signals
+        if arr.ndim == 1:
+            out[str(name)] = arr
+    return out
+
+
+def servotau_joints(columns: Mapping[str, np.ndarray]) -> list[str]:
+    """Joints of a servotau log (those with ``q/<joint>`` and ``q_des/<joint>``)."""
+    return [c[2:] for c in columns if c.startswith("q/") and f"q_des/{c[2:]}" in columns]
+
+
+def resolve_roles(columns: Mapping[str, np.ndarray], joint: str | None, roles: Mapping[str, str] | None) -> tuple[
+    dict[str, str], str | None
+]:
+    """Column of each role, and the joint, for one of the three layouts of the module doc."""
+    names = list(columns)
+    roles = dict(roles or {})
+    for role, col in roles.items():
+        if role not in ROLES:
+            raise IdentificationError(f"column role '{role}': expected one of {list(ROLES)}")
+        if col not in columns:
+            raise IdentificationError(f"column '{col}' (role {role}): not in the table: expected one of {names}")
+    joints = servotau_joints(columns)
+    if joints and not ({"target", "command"} & set(roles)):
+        if joint is None:
+            if len(joints) > 1:
+                raise IdentificationError(f"the log has joints {joints}: expected --joint to choose one")
+            joint = joints[0]
+        if joint not in joints:
+            raise IdentificationError(f"joint '{joint}': not in the log: expected one of {joints}")
+        found = {"position": f"q/{joint}", "command": f"q_des/{joint}"}
+        for role, candidates in (("torque", (f"est/tau/{joint}", f"true/tau/{joint}", f"tau/{joint}")),
+                                 ("velocity", (f"est/dq/{joint}", f"dq/{joint}"))):
+            col = next((c for c in candidates if c in columns), None)
+            if col is not None:
+                found[role] = col
+        if "t" in columns:
+            found["time"] = "t"
+        if "torque" not in found and "torque" not in roles:
+            raise IdentificationError(
+                f"joint '{joint}': no torque column: expected 'est/tau/{joint}' or 'true/tau/{joint}' "
+                "(or map one with torque=COLUMN)"
+            )
+        return {**found, **roles}, joint
+    if not roles or not ({"target", "command"} & set(roles)):
+        defaults = {"time": "t", "position": "q", "command": "q_des", "torque": "tau", "velocity": "dq",
+                    "acceleration": "ddq", "segment": "segment"}
+        found = {role: col for role, col in defaults.items() if col in columns}
+        roles = {**found, **roles}
+        missing = [defaults[r] for r in ("command", "position") if r not in roles]
+        if missing:
+            raise IdentificationError(
+                f"missing column(s) {missing}: expected a single-joint table with columns t, q, q_des, tau "
+                f"(optional dq), a servotau log with q/<joint>, or a role mapping (e.g. target=COLUMN); "
+                f"the table has {names}"
+            )
+        return roles, joint
+    if "target" not in roles and not {"command", "position"} <= set(roles):
+        raise IdentificationError("role 'command' needs role 'position' too (target = command - position)")
+    if "time" not in roles and "t" in columns:
+        roles["time"] = "t"
+    return roles, joint
+
+
+def load_dataset(
+    source: str | Path | Mapping[str, np.ndarray] | object,
+    *,
+    joint: str | None = None,
+    roles: Mapping[str, str] | None = None,
+    min_samples: int = MIN_SAMPLES,
+    smooth_torque_s: float = SMOOTH_TAU_S,
+) -> Dataset:
+    """Read a log (file path, pyarrow Table or mapping of columns) into a :class:`Dataset`.
+
+    Args:
+        source: The log.
+        joint: Joint of a servotau log (optional if it has one joint).
+        roles: Column of each role (see the module doc), overriding the recognised layout.
+        min_samples: Fewest valid samples accepted.
+        smooth_torque_s: Window [s] of the centred SG smoothing of the torque (0: none). A torque
+            estimate is noisy; without smoothing, any term that averages neighbouring samples (a lag, a
+            delay) would win by denoising it.
+
+    Raises:
+        IdentificationError: Missing or unknown column, unknown joint, too few samples, time not
+            increasing, or velocity needed but no time column: the message names the column and what
+            was expected.
+    """
+    if isinstance(source, (str, Path)):
+        columns = read_table(source)
+        name = str(source)
+    else:
+        columns = table_columns(source)
+        name = "table"
+    if not columns:
+        raise IdentificationError(f"{name}: no numeric column: expected a table of samples")
+    roles, joint = resolve_roles(columns, joint, roles)
+    used = {role: columns[col] for role, col in roles.items()}
+    n_total = len(next(iter(columns.values())))
+    valid = np.ones(n_total, dtype=bool)
+    for role, arr in used.items():
+        bad = ~np.isfinite(arr)
+        if bad.all():
+            raise IdentificationError(f"column '{roles[role]}' (role {role}): all {n_total} values are NaN or inf")
+        valid &= ~bad
+    n_dropped = int(n_total - valid.sum())
+    notes = []
+    if n_dropped:
+        notes.append(f"dropped {n_dropped} of {n_total} rows with NaN or inf in "
+                     f"{sorted(roles[r] for r, a in used.items() if not np.isfinite(a).all())}")
+        log.warning("%s: %s", name, notes[-1])
+    if valid.sum() < min_samples:
+        raise IdentificationError(
+            f"{name}: {int(valid.sum())} valid samples (after dropping {n_dropped} rows with NaN or inf): "
+            f"expected at least {min_samples}"
+        )
+    dt = None
+    if "time" in roles:
+        t = used["time"][valid]
+        steps = np.diff(t)
+        if np.any(steps <= 0):
+            k = int(np.argmax(steps <= 0))
+            raise IdentificationError(
+                f"column '{roles['time']}' (role time): not increasing at row {k + 1} ({t[k]} -> {t[k + 1]}): "
+                "expected strictly increasing time [s]"
+            )
+        dt = float(np.median(steps))
+    runs = _runs(valid, used["time"] if "time" in roles else None, dt)
+    if "velocity" not in roles:
+        if "position" not in roles:
+            raise IdentificationError("no velocity: expected a velocity column or a position column to differentiate")
+        if dt is None:
+            raise IdentificationError("no velocity column and no time column: expected 't' [s] to differentiate q")
+    sig: dict = {}
+    for role, arr in used.items():
+        if role in _SIGNAL_OF_ROLE:
+            sig[_SIGNAL_OF_ROLE[role]] = arr[valid]
+    if "acceleration" in roles:
+        sig["ddq_est"] = sig["ddq"]  # the log's own acceleration replaces the filtered one of the effects
+    if "velocity" not in roles:
+        sig["dq"] = _differentiate(used["position"], runs, dt, 1, SG_WINDOW_S)[valid]
+        notes.append(f"dq: centred Savitzky-Golay derivative of q ({_window(SG_WINDOW_S, dt)} samples, order 2)")
+    if "acceleration" not in roles and "position" in roles and dt is not None:
+        pos = used["position"]
+        sig["ddq"] = lambda: _differentiate(pos, runs, dt, 2, SG_WINDOW_DDQ_S)[valid]
+    if "torque" in roles and smooth_torque_s > 0 and dt is not None:
+        sig["tau"] = _differentiate(used["torque"], runs, dt, 0, smooth_torque_s)[valid]
+        notes.append(f"tau: centred Savitzky-Golay smoothing ({_window(smooth_torque_s, dt)} samples, order 2, "
+                     "no delay)")
+    if "target" in roles:
+        target = used["target"][valid]
+    else:
+        target = used["command"][valid] - used["position"][valid]
+    for col, arr in columns.items():
+        if col not in sig:
+            sig[col] = arr[valid]
+    n = int(valid.sum())
+    segment = used["segment"][valid] if "segment" in roles else None
+    return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes))
+
+
+def _window(seconds: float, dt: float) -> int:
+    w = max(5, int(round(seconds / dt)))
+    return w if w % 2 else w + 1
+
+
+def _runs(valid: np.ndarray, t: np.ndarray | None, dt: float | None) -> list[tuple[int, int]]:
+    """Index ranges [a, b) of consecutive valid samples without a time gap."""
+    breaks = np.flatnonzero(np.diff(np.concatenate([[0], valid.astype(np.int8), [0]])))
+    runs = list(zip(breaks[::2].tolist(), breaks[1::2].tolist(), strict=True))
+    if t is None or dt is None:
+        return runs
+    out = []
+    for a, b in runs:
+        gaps = np.flatnonzero(np.diff(t[a:b]) > 1.5 * dt) + 1
+        edges = [a, *(a + gaps).tolist(), b]
+        out += list(zip(edges[:-1], edges[1:], strict=True))
+    return out
+
+
+def _differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window_s: float) -> np.ndarray:
+    """Centred SG derivative of ``x`` on each run (order ``deriv + 1``, at least 2); runs shorter than the
+    window use a shorter window."""
+    from servotau.estimation.savgol import savgol_centred
+
+    out = np.zeros_like(x)
+    w = _window(window_s, dt)
+    order = max(2, deriv + 1)
+    for a, b in runs:
+        m = b - a
+        wr = min(w, m if m % 2 else m - 1)
+        if wr <= order:  # too short for the filter: finite differences (or zero for a single sample)
+            seg = x[a:b]
+            for _ in range(deriv):
+                seg = np.gradient(seg, dt) if len(seg) > 1 else np.zeros_like(seg)
+            out[a:b] = seg
+            continue
+        out[a:b] = savgol_centred(x[a:b], wr, order, dt, deriv=deriv)
+    return out
+
+
+def describe(ds: Dataset) -> list[str]:
+    """Human-readable lines: source, roles, samples, notes."""
+    roles = ", ".join(f"{r}={c}" for r, c in ds.roles.items())
+    period = f", period {1e3 * ds.dt:.3g} ms" if ds.dt else ""
+    head = f"{ds.source}" + (f" joint {ds.joint}" if ds.joint else "")
+    return [head, f"{ds.n} samples{period}", f"roles: {roles}", *ds.notes]
+
+
+def shifted(x: np.ndarray, k: int) -> np.ndarray:
+    """``x`` advanced by ``k`` samples (``y[i] = x[i + k]``; ``k < 0`` delays), edges held."""
+    if k == 0:
+        return x.copy()
+    if k > 0:
+        return np.concatenate([x[k:], np.full(k, x[-1])])
+    return np.concatenate([np.full(-k, x[0]), x[:k]])
+
+
+def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float]:
+    """Re-time the torque column against the encoders (an estimator's delay) and return the shift [s].
+
+    While the command holds still (at least 10 % of the samples; pushes or loads change the torque
+    there), the servo error follows the torque, ``d(dq_err)/dt ~ k_tau dtau/dt``, whatever the servo does
+    with a moving command (delay, lag). The shift ``s`` (whole samples in ``[-max_shift_s, max_shift_s]``)
+    that best correlates the two derivatives there is applied: ``tau(t + s)``, ``s > 0`` meaning the
+    torque column was late. Without such holds nothing is shifted. Samples at the ends hold the last value.
+    """
+    if not ds.has_torque or ds.dt is None or max_shift_s <= 0 or "q_des" not in ds.signals:
+        return ds, 0.0
+    still = np.abs(np.gradient(ds.signals["q_des"])) < 1e-12
+    kmax = int(round(max_shift_s / ds.dt))
+    rows = np.flatnonzero(still)
+    rows = rows[(rows >= kmax) & (rows < ds.n - kmax)]
+    if len(rows) < 0.1 * ds.n:
+        return ds, 0.0
+    tau = ds.signals["tau"]
+    de = np.gradient(ds.target)[rows]
+    dtau = np.gradient(tau)
+    best, best_c = 0, -np.inf
+    for k in range(-kmax, kmax + 1):
+        x = dtau[rows + k]
+        c = float(np.corrcoef(x, de)[0, 1]) if np.std(x) > 0 else -np.inf
+        if c > best_c:
+            best, best_c = k, c
+    if best == 0:
+        return ds, 0.0
+    sig = ds.signals.with_columns(tau=shifted(tau, best))
+    note = f"tau: advanced by {best * ds.dt * 1e3:.0f} ms to match the encoders (estimator delay)"
+    out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note))
+    return out, best * ds.dt
+
+
+def write_table(columns: Mapping[str, np.ndarray], path: str | Path) -> Path:
+    """Write columns to a Parquet (``.parquet``) or CSV (``.csv``) file; return the path."""
+    import pyarrow as pa
+
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    table = pa.table({k: np.asarray(v) for k, v in columns.items()})
+    if p.suffix.lower() == ".csv":
+        import pyarrow.csv as pcsv
+
+        pcsv.write_csv(table, p)
+    elif p.suffix.lower() in (".parquet", ".pq"):
+        import pyarrow.parquet as pq
+
+        pq.write_table(table, p)
+    else:
+        raise IdentificationError(f"{p}: unknown format '{p.suffix}': expected .parquet or .csv")
+    return p

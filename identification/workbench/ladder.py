@@ -1,0 +1,183 @@
+"""Add effects and watch the error fall: the ladder of models, each with training and held-out error.
+
+Greedy mode (no effect named): diagnose the current model, add the top effect if the verdict is
+``missing_effect``, refit everything with the same loss, diagnose again, until nothing is missing or
+``max_steps`` effects were added. Named mode: add the given effects in order, then diagnose the result.
+On every rung, the shapes the caller did not fix are chosen again jointly (coordinate descent over the
+grids, ``SWEEPS`` passes): an effect that was missing bends the shapes of the others.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from servotau.errors import IdentificationError
+
+from ..loss import Loss
+from ..motor_params import FitMetrics, MotorModel, MotorParameters
+from .data import Dataset
+from .diagnose import MIN_GAIN, Diagnosis, _r, diagnose
+from .effects import get_effect
+from .evaluate import Comparison, Fold, compare, folds_of
+from .model import FittedModel, ModelSpec, Term, resolve_shapes
+
+SWEEPS = 3
+
+
+@dataclass(frozen=True, eq=False)
+class Rung:
+    """One model of the ladder: what was added, the comparison (training and held-out)."""
+
+    label: str
+    added: str | None
+    comparison: Comparison
+
+    def to_dict(self) -> dict:
+        c = self.comparison
+        return {
+            "model": self.label,
+            "added": self.added,
+            "shape": None if self.added is None else dict(c.model.spec.terms[-1].shape),
+            "train_rms": _r(c.train.rms),
+            "heldout_rms": _r(c.heldout.rms) if c.heldout else None,
+            "train_error": _r(c.train.error),
+            "heldout_error": _r(c.heldout.error) if c.heldout else None,
+            "heldout_fit_percent": _r(c.heldout.fit_percent) if c.heldout else None,
+            "overestimation_rate": _r(c.train.overestimation_rate),
+            "coefficients": {k: _r(v) for k, v in c.model.coefficients.items()},
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Ladder:
+    """The models in the order they were built, and the diagnoses that chose each step.
+
+    Attributes:
+        rungs: Base model first.
+        diagnoses: ``diagnoses[i]`` ranked the effects missing from ``rungs[i]`` (the last one gives the
+            final verdict; named mode has only the last).
+        loss: Loss of every fit.
+    """
+
+    rungs: tuple[Rung, ...]
+    diagnoses: tuple[Diagnosis, ...]
+    loss: Loss
+
+    @property
+    def final(self) -> FittedModel:
+        return self.rungs[-1].comparison.model
+
+    @property
+    def verdict(self) -> str | None:
+        """Verdict on the final model (None if it was not diagnosed)."""
+        return self.diagnoses[-1].verdict if self.diagnoses else None
+
+    def fall(self) -> float:
+        """Fraction of the base model's held-out error removed by the final model."""
+        e0 = self.rungs[0].comparison.heldout.error
+        return 1.0 - self.rungs[-1].comparison.heldout.error / e0 if e0 > 0 else 0.0
+
+    def to_dict(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "ladder": [r.to_dict() for r in self.rungs],
+            "heldout_fall": _r(self.fall()),
+            "loss": str(self.loss),
+        }
+
+
+def add_effects(
+    ds: Dataset,
+    spec: ModelSpec,
+    loss: Loss | None = None,
+    *,
+    effects: Iterable[str] | None = None,
+    candidates: Iterable[str] | None = None,
+    max_steps: int = 4,
+    min_gain: float = MIN_GAIN,
+    folds: list[Fold] | None = None,
+    progress: Callable[[str], None] | None = None,
+    diagnose_final: bool = True,
+) -> Ladder:
+    """Build the ladder from ``spec`` (see the module doc).
+
+    Args:
+        ds: The data.
+        spec: The base model.
+        loss: Loss of every fit (default least squares).
+        effects: Effects to add in this order; None: greedy, by diagnosis.
+        candidates: Effects the greedy search may add (default all registered).
+        max_steps: Most effects added by the greedy search.
+        min_gain: Threshold of :func:`~servotau.identification.workbench.diagnose.diagnose`.
+        folds: Held-out blocks.
+        progress: Called with short messages.
+        diagnose_final: In named mode, rank what is still missing from the final model (the verdict).
+    """
+    loss = loss or Loss.least_squares()
+    folds = folds or folds_of(ds)
+    cache: dict = {}
+    say = progress or (lambda _msg: None)
+    free = [t.shape is None for t in spec.terms]  # shapes not given by the caller are chosen again on every rung
+    spec = resolve_shapes(ds.signals, ds.target, spec, loss, cache, sweeps=SWEEPS)
+    rungs = [Rung(spec.label(), None, compare(ds, spec, loss, folds=folds, cache=cache))]
+    diagnoses: list[Diagnosis] = []
+
+    def climb(name: str) -> None:
+        nonlocal free, spec
+        free = [*free, True]
+        spec = resolve_shapes(ds.signals, ds.target, spec.plus(Term(name)), loss, cache, sweeps=SWEEPS, free=free)
+        rungs.append(Rung(spec.label(), name, compare(ds, spec, loss, folds=folds, cache=cache)))
+
+    if effects is not None:
+        for name in effects:
+            get_effect(name)
+            if name in spec.effect_names:
+                raise IdentificationError(f"effect '{name}' is already in the model {spec.label()}")
+            say(f"adding {name}")
+            climb(name)
+        if diagnose_final:
+            say("diagnosing the final model")
+            diagnoses.append(diagnose(ds, spec, loss, effects=_remaining(candidates, spec), folds=folds,
+                                      min_gain=min_gain, cache=cache, progress=progress))
+        return Ladder(tuple(rungs), tuple(diagnoses), loss)
+    for step in range(max_steps + 1):
+        say(f"step {step}: diagnosing {spec.label()}")
+        d = diagnose(ds, spec, loss, effects=_remaining(candidates, spec), folds=folds, min_gain=min_gain,
+                     cache=cache, progress=progress)
+        diagnoses.append(d)
+        if d.verdict != "missing_effect" or step == max_steps:
+            break
+        top = d.top
+        say(f"adding {top.effect} ({100 * top.heldout_gain:.0f} % of the held-out error); refitting the shapes")
+        climb(top.effect)
+    return Ladder(tuple(rungs), tuple(diagnoses), loss)
+
+
+def _remaining(candidates: Iterable[str] | None, spec: ModelSpec) -> list[str] | None:
+    if candidates is None:
+        return None
+    return [c for c in candidates if c not in spec.effect_names]
+
+
+def save_model(
+    ladder_or_model: Ladder | FittedModel,
+    path: str | Path,
+    joint: str,
+    *,
+    provenance: str,
+    metrics: FitMetrics | None = None,
+) -> Path:
+    """Write the model into the motor-parameter file ``path`` under ``joint`` (other joints of an
+    existing file are kept)."""
+    if isinstance(ladder_or_model, Ladder):
+        model = ladder_or_model.final
+        train = ladder_or_model.rungs[-1].comparison.train
+        metrics = metrics or FitMetrics(train.rms, train.overestimation_rate, train.n)
+    else:
+        model = ladder_or_model
+    motor = model.to_motor_model(provenance, metrics)
+    p = Path(path)
+    models: Mapping[str, MotorModel] = dict(MotorParameters.load_toml(p)) if p.exists() else {}
+    return MotorParameters({**models, joint: motor}).save_toml(p)

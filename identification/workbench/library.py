@@ -1,0 +1,449 @@
+"""The built-in library of physical effects (registered at import).
+
+Each effect adds ``c * phi`` [rad] to ``dq_err = q_des - q``. Torques in the servo enter ``dq_err``
+divided by the position gain, so a friction torque ``f`` appears as ``k_tau f``: the coefficients
+below are in [rad] per unit of ``phi``. ``u = k_tau tau + k_v dq`` is the linear part of the model
+the effect is added to. ``s(x, v) = tanh(x / v)`` is a sign smoothed over ``v`` (``v = 0``: plain sign).
+
+========================  =====================================================  ==========================
+effect                    phi                                                    on-line signals
+========================  =====================================================  ==========================
+``coulomb``               ``s(dq, v_eps)``                                       dq
+``coulomb_asym``          ``|s(dq, v_eps)|``                                     dq
+``stribeck``              ``s(dq, v_eps) exp(-(dq / v_s)^2)``                    dq
+``stiction``              ``z exp(-(dq / v_th)^2)``, z = sign of the last move   dq history (a latch)
+``deadzone``              ``clip(u / band, -1, 1)``                              tau, dq
+``direction_gain``        ``s(dq, v_eps) u``                                     tau, dq
+``load_friction``         ``|tau| s(dq, v_eps)``                                 tau, dq
+``backlash``              ``s(tau, tau_band)``                                   tau
+``cogging``               ``sin(2 pi q / period + phase)``                       q
+``thermal_drift``         ``h dq``, ``h`` = lag(``(u / 1 mrad)^2``, tau_th)      tau, dq history (a lag)
+``saturation``            ``sign(m) [|m| > u_sat]``, m = u - 0.67 k_v dq         tau, dq
+``elastic``               ``ddq`` (centred SG of q over ``window``)               ddq (the estimator's)
+``motor_lag``             ``lag(u, time_constant) - u``                          tau, dq history (a lag)
+``delay``                 ``q_des(t) - q_des(t - delay)``                        q_des history
+========================  =====================================================  ==========================
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from .effects import Effect, register_effect
+from .excitation import Excitation
+from .signals import Signals, delayed, direction_latch, lowpass, lowpass_gain, ticks
+
+U_REF = 1e-3  # [rad] scale of u in the thermal heating proxy
+
+
+def smooth_sign(x: np.ndarray, v: float) -> np.ndarray:
+    """``tanh(x / v)``, or ``sign(x)`` for ``v <= 0``."""
+    return np.sign(x) if v <= 0.0 else np.tanh(x / v)
+
+
+# -- excitation requirements: a reason string when the data cannot test the effect ---------------------
+def _both_directions(e: Excitation) -> str | None:
+    if e.velocity_reversals < 2:
+        return f"only {e.velocity_reversals} velocity reversals: expected motion in both directions (>= 2)"
+    return None
+
+
+def _slow_and_fast(e: Excitation) -> str | None:
+    if e.slow_time < 0.5 or e.fast_time < 0.5:
+        return (f"slow motion {e.slow_time:.1f} s, fast motion {e.fast_time:.1f} s: expected >= 0.5 s of each "
+                "(the Stribeck curve needs several speeds)")
+    return _both_directions(e)
+
+
+def _holds_after_motion(e: Excitation) -> str | None:
+    if e.hold_time < 0.5:
+        return f"hold time {e.hold_time:.1f} s: expected >= 0.5 s of holding still after motion"
+    return _both_directions(e)
+
+
+def _torque_reversal_at_rest(e: Excitation) -> str | None:
+    if e.torque_range is None:
+        return "no torque column"
+    if e.torque_reversals_at_rest < 1:
+        return ("the torque never changed sign while holding still: a dead zone looks like Coulomb friction; "
+                "push the joint through zero torque at rest")
+    return None
+
+
+def _torque_reversal(e: Excitation) -> str | None:
+    if e.torque_range is None:
+        return "no torque column"
+    if e.torque_reversals < 2:
+        return f"{e.torque_reversals} torque sign changes: expected >= 2 (the gear must cross its play)"
+    return None
+
+
+def _loaded_motion(e: Excitation) -> str | None:
+    if e.torque_range is None:
+        return "no torque column"
+    if e.loaded_motion < 0.05:
+        return f"loaded motion {100 * e.loaded_motion:.0f} %: expected >= 5 % of moving samples under high torque"
+    return _both_directions(e)
+
+
+def _position_sweep(e: Excitation) -> str | None:
+    if e.position_range is None:
+        return "no position column"
+    if e.position_range[1] - e.position_range[0] < 0.05:
+        return "position range < 0.05 rad: expected a sweep over several ripple periods"
+    return None
+
+
+def _long_enough(e: Excitation) -> str | None:
+    if e.duration < 10.0:
+        return f"duration {e.duration:.1f} s: expected >= 10 s for a thermal drift"
+    return None
+
+
+def _fast(e: Excitation) -> str | None:
+    if e.fast_time < 0.5:
+        return f"fast motion {e.fast_time:.1f} s: expected >= 0.5 s faster than 0.3 rad/s (dynamics)"
+    return None
+
+
+def _has_torque(e: Excitation) -> str | None:
+    return "no torque column" if e.torque_range is None else None
+
+
+# -- regressors ---------------------------------------------------------------------------------------
+def coulomb(s: Signals, v_eps: float) -> np.ndarray:
+    return smooth_sign(s["dq"], v_eps)
+
+
+def coulomb_asym(s: Signals, v_eps: float) -> np.ndarray:
+    return np.abs(smooth_sign(s["dq"], v_eps))
+
+
+def stribeck(s: Signals, v_s: float, v_eps: float) -> np.ndarray:
+    dq = s["dq"]
+    return smooth_sign(dq, v_eps) * np.exp(-((dq / v_s) ** 2))
+
+
+def stiction(s: Signals, v_th: float) -> np.ndarray:
+    dq = s["dq"]
+    return direction_latch(dq, v_th) * np.exp(-((dq / v_th) ** 2))
+
+
+def deadzone(s: Signals, band: float, damping_share: float = 0.0) -> np.ndarray:
+    return np.clip((s["u"] - damping_share * s["u_v"]) / band, -1.0, 1.0)
+
+
+def direction_gain(s: Signals, v_eps: float) -> np.ndarray:
+    return smooth_sign(s["dq"], v_eps) * s["u"]
+
+
+def load_friction(s: Signals, v_eps: float) -> np.ndarray:
+    return np.abs(s["tau"]) * smooth_sign(s["dq"], v_eps)
+
+
+def acceleration(s: Signals, window: float) -> np.ndarray:
+    """The acceleration [rad/s^2]: an estimate given with the data (``ddq_est``: an acceleration column of
+    the log, or the controller's estimator on-line), else the centred SG second derivative of ``q`` over
+    ``window`` [s] (order 3)."""
+    from servotau.estimation.savgol import savgol_centred
+
+    if "ddq_est" in s:
+        return s["ddq_est"]
+    if window <= 0.0:
+        return s["ddq"]
+    dt = s.require_dt("acceleration")
+    w = max(5, int(round(window / dt)) | 1)
+    if w > s.n:
+        return s["ddq"]
+    return savgol_centred(s["q"], w, 3, dt, deriv=2)
+
+
+def backlash(s: Signals, window: float, tau_band: float, gain: float) -> np.ndarray:
+    return acceleration(s, window) * (1.0 + gain * np.exp(-((s["tau"] / tau_band) ** 2)))
+
+
+def cogging(s: Signals, period: float, phase: float = 0.0) -> np.ndarray:
+    return np.sin(2.0 * math.pi * s["q"] / period + phase)
+
+
+def _cogging_columns(s: Signals, period: float) -> np.ndarray:
+    x = 2.0 * math.pi * s["q"] / period
+    return np.column_stack([np.sin(x), np.cos(x)])
+
+
+def _cogging_fold(c: np.ndarray, shape: Mapping[str, float]) -> tuple[float, dict[str, float]]:
+    # a sin(x) + b cos(x) = r sin(x + phase)
+    return float(math.hypot(c[0], c[1])), {**shape, "phase": float(math.atan2(c[1], c[0]))}
+
+
+def thermal_drift(s: Signals, tau_th: float) -> np.ndarray:
+    dt = s.require_dt("thermal_drift")
+    heat = lowpass((s["u"] / U_REF) ** 2, tau_th, dt, y0=0.0)
+    return heat * s["dq"]
+
+
+def saturation(s: Signals, u_sat: float, damping_share: float = 0.67) -> np.ndarray:
+    m = s["u"] - damping_share * s["u_v"]
+    return np.sign(m) * (np.abs(m) > u_sat)
+
+
+def _saturation_grid(s: Signals) -> tuple[dict[str, float], ...]:
+    """Thresholds at high quantiles of the motor-torque proxy of the data (the limit is where it piles up)."""
+    m = np.abs(s["u"] - 0.67 * s["u_v"])
+    levels = np.quantile(m, (0.9, 0.97, 0.99))
+    return tuple({"u_sat": float(f"{v:.4g}"), "damping_share": 0.67} for v in levels)
+
+
+def elastic(s: Signals, window: float) -> np.ndarray:
+    return acceleration(s, window)
+
+
+def motor_lag(s: Signals, time_constant: float) -> np.ndarray:
+    u = s["u"]
+    return lowpass(u, time_constant, s.require_dt("motor_lag")) - u
+
+
+def delay(s: Signals, delay: float) -> np.ndarray:
+    q_des = s["q_des"]
+    return q_des - delayed(q_des, ticks(delay, s.require_dt("delay")))
+
+
+# -- on-line evaluators of the effects with memory -----------------------------------------------------
+class _StictionOnline:
+    def __init__(self, shape: Mapping[str, float], period: float):
+        self.v_th = shape["v_th"]
+        self.z = 0.0
+
+    def _z(self, dq: float) -> float:
+        return math.copysign(1.0, dq) if abs(dq) > self.v_th else self.z
+
+    def value(self, x: Mapping[str, float]) -> float:
+        return self._z(x["dq"]) * math.exp(-((x["dq"] / self.v_th) ** 2))
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        self.z = self._z(x["dq"])
+
+
+class _LagOnline:
+    """``y += a (x - y)`` on a signal of the sample; subclasses say what x is and what is returned."""
+
+    def __init__(self, time_constant: float, period: float, y0: float | None):
+        self.a = lowpass_gain(time_constant, period)
+        self.y = y0
+
+    def _next(self, x: float) -> float:
+        y = x if self.y is None else self.y  # first sample: y[-1] = x[0] unless y0 was given
+        return y + self.a * (x - y)
+
+
+class _ThermalOnline(_LagOnline):
+    def __init__(self, shape: Mapping[str, float], period: float):
+        super().__init__(shape["tau_th"], period, 0.0)
+
+    def value(self, x: Mapping[str, float]) -> float:
+        return self._next((x["u"] / U_REF) ** 2) * x["dq"]
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        self.y = self._next((x["u"] / U_REF) ** 2)
+
+
+class _MotorLagOnline(_LagOnline):
+    def __init__(self, shape: Mapping[str, float], period: float):
+        super().__init__(shape["time_constant"], period, None)
+
+    def value(self, x: Mapping[str, float]) -> float:
+        return self._next(x["u"]) - x["u"]
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        self.y = self._next(x["u"])
+
+
+class _DelayOnline:
+    def __init__(self, shape: Mapping[str, float], period: float):
+        self.n = ticks(shape["delay"], period)
+        self.buf: list[float] = []
+
+    def _old(self, q_des: float) -> float:
+        if len(self.buf) < self.n:
+            return self.buf[0] if self.buf else q_des
+        return self.buf[-self.n]
+
+    def value(self, x: Mapping[str, float]) -> float:
+        return x["q_des"] - self._old(x["q_des"])
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        self.buf.append(x["q_des"])
+        if len(self.buf) > self.n:
+            del self.buf[0]
+
+
+_V_EPS = (0.0, 0.005, 0.01, 0.02, 0.05)  # [rad/s] sign smoothing
+_V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
+
+BUILTIN = (
+    Effect(
+        "coulomb", coulomb, tuple({"v_eps": v} for v in _V_EPS), ("dq",),
+        "residual against velocity: a step at dq = 0, equal and opposite on both sides, flat beyond",
+        "velocity", "Coulomb friction: a constant torque opposing the motion", _both_directions,
+        confusable=("deadzone", "stribeck"),
+    ),
+    Effect(
+        "coulomb_asym", coulomb_asym, tuple({"v_eps": v} for v in _V_EPS), ("dq",),
+        "residual against velocity: the same offset on both sides of dq = 0 while moving, none at rest",
+        "velocity", "Coulomb friction larger in one direction than in the other", _both_directions,
+    ),
+    Effect(
+        "stribeck", stribeck, tuple({"v_s": v, "v_eps": e} for v in _V_S for e in (0.005, 0.01, 0.02)), ("dq",),
+        "residual against velocity: opposite peaks just above and below dq = 0, fading beyond v_s",
+        "velocity", "breakaway friction above Coulomb at low speed, decaying with speed", _slow_and_fast,
+        confusable=("stiction", "coulomb"),
+    ),
+    Effect(
+        "stiction", stiction, tuple({"v_th": v} for v in (0.005, 0.01, 0.02, 0.05)), ("dq",),
+        "residual while holding still keeps the sign of the last motion",
+        "velocity", "static friction holding the joint after a move, in the direction of that move",
+        _holds_after_motion, online=_StictionOnline, history=True, confusable=("stribeck", "backlash"),
+    ),
+    Effect(
+        "deadzone", deadzone,
+        tuple({"band": b, "damping_share": d} for d in (0.0, 0.33, 0.67) for b in (3e-5, 1e-4, 3e-4, 1e-3)),
+        ("tau", "dq", "u", "u_v"),
+        "residual against the linear prediction u: a step at u = 0 (the servo needs a minimum error)",
+        "servo_error", "dead zone of the servo (on the position error or the current)", _torque_reversal_at_rest,
+        confusable=("backlash", "coulomb"),
+    ),
+    Effect(
+        "direction_gain", direction_gain, tuple({"v_eps": v} for v in _V_EPS[1:]), ("tau", "dq", "u"),
+        "residual proportional to u with opposite slopes for dq > 0 and dq < 0",
+        "servo_error", "servo gain that changes with the direction of motion", _both_directions,
+        confusable=("load_friction",),
+    ),
+    Effect(
+        "load_friction", load_friction, tuple({"v_eps": v} for v in _V_EPS[1:]), ("tau", "dq"),
+        "residual against torque split by velocity sign: a V (|tau|) with opposite signs for dq > 0 and dq < 0",
+        "torque", "friction growing with the transmitted load", _loaded_motion, confusable=("direction_gain",),
+    ),
+    Effect(
+        "backlash", backlash,
+        tuple({"window": w, "tau_band": b, "gain": g}
+              for w in (0.011, 0.021) for b in (2.0, 5.0, 10.0) for g in (1.0, 3.0)),
+        ("q", "tau"),
+        "residual follows the motor acceleration, more strongly while the torque is near zero (the rotor crosses "
+        "the play unloaded)",
+        "dynamics", "compliant gear with play: the rotor inertia acts behind the gear, freely inside the play",
+        _torque_reversal,
+        confusable=("elastic", "deadzone"),
+    ),
+    Effect(
+        "cogging", cogging, tuple({"period": p} for p in np.geomspace(0.01, 0.32, 11).round(4).tolist()), ("q",),
+        "residual against position: a ripple of fixed period",
+        "position", "torque ripple periodic in the joint angle (motor cogging, gear tooth mesh)", _position_sweep,
+        fit_columns=_cogging_columns, fold=_cogging_fold,
+    ),
+    Effect(
+        "thermal_drift", thermal_drift, tuple({"tau_th": v} for v in (10.0, 30.0, 100.0)), ("t", "tau", "dq", "u"),
+        "residual against time: the velocity slope of the residual drifts as the motor heats",
+        "time", "friction changing with the winding temperature (heated by the current)", _long_enough,
+        online=_ThermalOnline, history=True,
+    ),
+    Effect(
+        "saturation", saturation, _saturation_grid, ("tau", "dq", "u", "u_v"),
+        "large residuals of the sign of u where the motor-torque proxy sits at its largest values (the current "
+        "limit); the error past the limit is not a function of the torque, so no term removes it all",
+        "servo_error", "current limit: past it the servo cannot produce more torque", _has_torque,
+    ),
+    Effect(
+        "elastic", elastic, tuple({"window": w} for w in (0.011, 0.021, 0.041, 0.081)), ("q",),
+        "residual proportional to the acceleration (rotor inertia behind a compliant gear)",
+        "dynamics", "elastic gear: the motor inertia acts behind the spring, outside the link torque", _fast,
+        confusable=("backlash", "motor_lag", "delay"),
+    ),
+    Effect(
+        "motor_lag", motor_lag, tuple({"time_constant": v} for v in (0.005, 0.01, 0.02, 0.05)),
+        ("t", "tau", "dq", "u"),
+        "residual correlates with -du/dt: the servo reaches the expected error after a first-order lag",
+        "dynamics", "first-order lag of the servo (current loop, filters)", _fast, online=_MotorLagOnline,
+        history=True, confusable=("delay", "elastic"),
+    ),
+    Effect(
+        "delay", delay, tuple({"delay": v} for v in (0.002, 0.005, 0.01, 0.02)), ("t", "q_des"),
+        "residual correlates with the command velocity: the servo sees q_des late",
+        "dynamics", "dead time between the command and the servo", _fast, online=_DelayOnline, history=True,
+        confusable=("motor_lag", "elastic"),
+    ),
+)
+
+for _effect in BUILTIN:
+    register_effect(_effect, replace=True)
+
+EXPERIMENTS = {
+    frozenset(("direction_gain", "load_friction")): (
+        "move in both directions under torques of both signs (push the limb while it moves): a direction gain "
+        "follows the sign of u, load friction the magnitude |tau|"
+    ),
+    frozenset(("deadzone", "backlash")): (
+        "reverse the torque at rest (a push through zero), then move fast against a constant load: a dead zone "
+        "follows the sign of the servo error u, backlash the sign of the torque"
+    ),
+    frozenset(("deadzone", "coulomb")): (
+        "hold still and push the joint through zero torque: Coulomb friction vanishes at rest, a dead zone does not"
+    ),
+    frozenset(("stribeck", "stiction")): (
+        "constant-velocity ramps at several slow speeds (0.01 to 0.3 rad/s) and holds approached from both "
+        "sides: Stribeck friction decays with speed, stiction acts only at rest with the sign of the last move"
+    ),
+    frozenset(("stribeck", "coulomb")): (
+        "constant-velocity ramps at several speeds: the Stribeck excess fades with speed, Coulomb friction stays"
+    ),
+    frozenset(("delay", "motor_lag")): (
+        "command steps or a chirp: a dead time shows a flat start and a phase lag growing linearly with "
+        "frequency; a first-order lag responds at once and its phase saturates at 90 degrees"
+    ),
+    frozenset(("elastic", "backlash")): (
+        "reverse the torque slowly at rest and compare a link-side angle with the motor encoder: backlash jumps by "
+        "the play at zero torque, an elastic gear deflects in proportion to the torque"
+    ),
+    frozenset(("elastic", "motor_lag")): (
+        "a chirp of the command at constant load: the acceleration term grows with the square of the frequency, "
+        "a lag's phase saturates"
+    ),
+    frozenset(("elastic", "delay")): (
+        "command steps (or a chirp): a dead time shows a flat start, the rotor inertia a response to the "
+        "acceleration from the first sample"
+    ),
+    frozenset(("stiction", "backlash")): (
+        "hold after moving in each direction under the same load, then reverse the load at rest: stiction keeps "
+        "the sign of the last move, backlash follows the sign of the torque"
+    ),
+}
+
+
+# -- scalar versions of the effects without memory, for the on-line evaluator (one sample at a time) ----
+def _ssign(x: float, v: float) -> float:
+    return (x > 0) - (x < 0) if v <= 0.0 else math.tanh(x / v)
+
+
+def _sample_acc(x: Mapping[str, float]) -> float:
+    return x["ddq_est"] if "ddq_est" in x else x["ddq"]
+
+
+SCALAR = {
+    "coulomb": lambda x, v_eps: _ssign(x["dq"], v_eps),
+    "coulomb_asym": lambda x, v_eps: abs(_ssign(x["dq"], v_eps)),
+    "stribeck": lambda x, v_s, v_eps: _ssign(x["dq"], v_eps) * math.exp(-((x["dq"] / v_s) ** 2)),
+    "deadzone": lambda x, band, damping_share=0.0: min(1.0, max(-1.0, (x["u"] - damping_share * x["u_v"]) / band)),
+    "direction_gain": lambda x, v_eps: _ssign(x["dq"], v_eps) * x["u"],
+    "load_friction": lambda x, v_eps: abs(x["tau"]) * _ssign(x["dq"], v_eps),
+    "backlash": lambda x, window, tau_band, gain: (
+        _sample_acc(x) * (1.0 + gain * math.exp(-((x["tau"] / tau_band) ** 2)))
+    ),
+    "cogging": lambda x, period, phase=0.0: math.sin(2.0 * math.pi * x["q"] / period + phase),
+    "saturation": lambda x, u_sat, damping_share=0.67: (
+        _ssign(x["u"] - damping_share * x["u_v"], 0.0) * (abs(x["u"] - damping_share * x["u_v"]) > u_sat)
+    ),
+    "elastic": lambda x, window: _sample_acc(x),
+}
+"""``phi(sample, **shape)`` of the built-in effects without memory, on one sample (a mapping of floats)."""

@@ -1,0 +1,391 @@
+"""A model of the workbench: the paper's linear part plus effect terms, its fit and its conversions.
+
+``dq_err = k_tau tau + k_v dq + sum_e c_e phi_e(signals; shape_e)``
+
+Terms whose regressor reads ``u`` (the model's servo error without such terms, see
+:meth:`FittedModel.context`) are fitted by a fixed point: ``u`` from the previous fit (first the model
+without them), fit, update ``u``, fit again (``FIXED_POINT`` rounds). Each round's model is scored as it
+will be used, ``u`` from its own coefficients, and the round of least training loss is kept (the
+iteration need not converge: a wide dead band leaves the error undetermined inside it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from servotau.errors import IdentificationError
+
+from ..asymmetric import asymmetric_cost
+from ..fit import fit_with_loss
+from ..loss import Loss
+from ..motor_params import EffectTerm, FitMetrics, MotorModel
+from ..regressors import K_TAU, K_V, Regressors
+from ..validation import MAX_CONDITION, MIN_SAMPLES_PER_PARAMETER, check_min_samples
+from .effects import get_effect
+from .signals import Signals
+
+FIXED_POINT = 4
+LINEAR_SIGNAL = {K_TAU: "tau", K_V: "dq"}
+
+
+@dataclass(frozen=True)
+class Term:
+    """An effect in a model; ``shape`` None means "choose it from the effect's grid"."""
+
+    effect: str
+    shape: Mapping[str, float] | None = None
+
+    def __post_init__(self) -> None:
+        get_effect(self.effect)
+        if self.shape is not None:
+            object.__setattr__(self, "shape", {str(k): float(v) for k, v in self.shape.items()})
+
+    def label(self) -> str:
+        if not self.shape:
+            return self.effect
+        return f"{self.effect}({', '.join(f'{k}={v:.3g}' for k, v in self.shape.items())})"
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Which coefficients a model has: ``linear`` (``k_tau``, ``k_v``) and effect ``terms``."""
+
+    linear: tuple[str, ...] = (K_TAU, K_V)
+    terms: tuple[Term, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "linear", tuple(self.linear))
+        object.__setattr__(self, "terms", tuple(self.terms))
+        for k in self.linear:
+            if k not in LINEAR_SIGNAL:
+                raise IdentificationError(f"linear coefficient '{k}': expected one of {list(LINEAR_SIGNAL)}")
+        names = self.effect_names
+        if len(set(names)) != len(names):
+            raise IdentificationError(f"model terms {names}: expected each effect at most once")
+
+    @property
+    def effect_names(self) -> list[str]:
+        return [t.effect for t in self.terms]
+
+    def plus(self, term: Term) -> ModelSpec:
+        return ModelSpec(self.linear, (*self.terms, term))
+
+    def label(self) -> str:
+        base = " + ".join(self.linear) if self.linear else "0"
+        return " + ".join([base, *self.effect_names])
+
+    @property
+    def uses_u(self) -> bool:
+        return any(get_effect(t.effect).uses_model for t in self.terms)
+
+
+def linear_for(signals: Signals) -> tuple[str, ...]:
+    """The linear coefficients the signals allow: ``k_tau`` if there is a torque, ``k_v`` always."""
+    return tuple(k for k, s in LINEAR_SIGNAL.items() if s in signals)
+
+
+def parse_spec(text: str | Sequence[str] | None, signals: Signals) -> ModelSpec:
+    """A model from ``"paper"`` (k_tau, k_v), ``"coulomb"`` (paper + coulomb) or names joined by ``+``/``,``
+    (e.g. ``"coulomb+deadzone"``; ``paper`` may appear and means nothing more)."""
+    linear = linear_for(signals)
+    if text is None:
+        return ModelSpec(linear)
+    parts = text if not isinstance(text, str) else text.replace(",", "+").split("+")
+    names = [p.strip() for p in parts if p.strip() and p.strip() != "paper"]
+    return ModelSpec(linear, tuple(Term(n) for n in names))
+
+
+@dataclass(frozen=True, eq=False)
+class FittedModel:
+    """A fitted model: coefficients by name (``k_tau``, ``k_v``, effect names) and the loss used."""
+
+    spec: ModelSpec
+    coefficients: Mapping[str, float]
+    loss: Loss = field(default_factory=Loss)
+
+    def __post_init__(self) -> None:
+        for t in self.spec.terms:
+            if t.shape is None:
+                raise IdentificationError(f"term '{t.effect}': a fitted model needs its shape")
+        object.__setattr__(self, "coefficients", {k: float(v) for k, v in self.coefficients.items()})
+
+    def u(self, signals: Signals) -> np.ndarray:
+        """The model's servo error without the terms that read it [rad] (see :meth:`context`)."""
+        return self.context(signals)["u"]
+
+    def context(self, signals: Signals) -> dict[str, np.ndarray]:
+        """The model-dependent signals [rad] that some regressors read: ``u_tau = k_tau tau``,
+        ``u_v = k_v dq`` and ``u``, the model's prediction without the terms that read ``u`` (the paper's
+        ``k_tau tau + k_v dq`` plus friction-like terms: the position error the servo works with)."""
+        c = self.coefficients
+        zero = np.zeros(signals.n)
+        u_tau = c[K_TAU] * signals["tau"] if K_TAU in self.spec.linear else zero
+        u_v = c[K_V] * signals["dq"] if K_V in self.spec.linear else zero
+        u = u_tau + u_v
+        for t in self.spec.terms:
+            eff = get_effect(t.effect)
+            if not eff.uses_model:
+                u = u + c[t.effect] * eff.evaluate(signals, t.shape)
+        return {"u": u, "u_tau": u_tau, "u_v": u_v}
+
+    def predict(self, signals: Signals) -> np.ndarray:
+        """Model output [rad] on ``signals``."""
+        ctx = self.context(signals)
+        su = signals.with_columns(**ctx)
+        out = ctx["u"].copy()
+        for t in self.spec.terms:
+            eff = get_effect(t.effect)
+            if eff.uses_model:
+                out += self.coefficients[t.effect] * eff.evaluate(su, t.shape)
+        return out
+
+    def describe(self) -> list[str]:
+        lines = [f"{k} = {self.coefficients[k]:.6g}" for k in self.spec.linear]
+        lines += [f"{t.label()}: {self.coefficients[t.effect]:.6g}" for t in self.spec.terms]
+        return lines
+
+    def to_motor_model(self, provenance: str, metrics: FitMetrics | None = None) -> MotorModel:
+        """The motor-parameter entry: ``coulomb`` with a plain sign and a coefficient >= 0 becomes ``k_c``,
+        every other term an extra term with its shape.
+
+        Raises:
+            IdentificationError: The model has no ``k_tau`` (a table without torque), or ``k_tau <= 0``.
+        """
+        if K_TAU not in self.spec.linear or K_V not in self.spec.linear:
+            raise IdentificationError(
+                f"model {self.spec.label()}: a motor model needs k_tau and k_v: expected torque and velocity roles"
+            )
+        k_c = None
+        extra = {}
+        for t in self.spec.terms:
+            c = self.coefficients[t.effect]
+            if t.effect == "coulomb" and t.shape.get("v_eps", 0.0) == 0.0 and c >= 0.0:
+                k_c = c
+            else:
+                extra[t.effect] = EffectTerm(c, t.shape)
+        k_v = self.coefficients[K_V]
+        if k_v < 0:
+            raise IdentificationError(f"fitted k_v = {k_v:.3g}: expected >= 0 for a motor model; check the data")
+        return MotorModel(self.coefficients[K_TAU], k_v, k_c, extra, self.loss, provenance, metrics)
+
+    @classmethod
+    def from_motor_model(cls, m: MotorModel) -> FittedModel:
+        """The workbench form of a motor-parameter entry (``k_c`` is the ``coulomb`` term, plain sign)."""
+        terms, coefs = [], {K_TAU: m.k_tau, K_V: m.k_v}
+        if m.k_c is not None and "coulomb" in m.extra:
+            raise IdentificationError("k_c and an extra term 'coulomb' are both set: expected one Coulomb term")
+        if m.k_c is not None:
+            terms.append(Term("coulomb", {"v_eps": 0.0}))
+            coefs["coulomb"] = m.k_c
+        for name, term in m.extra.items():
+            terms.append(Term(name, dict(term.shape)))
+            coefs[name] = term.coefficient
+        return cls(ModelSpec((K_TAU, K_V), tuple(terms)), coefs, m.loss)
+
+
+def design(signals: Signals, spec: ModelSpec, ctx: Mapping[str, np.ndarray] | None, cache: dict | None = None) -> tuple[
+    list[str], np.ndarray, list[tuple[str, Mapping[str, float], slice]]
+]:
+    """Columns of ``spec`` (shapes fixed) with the model context ``ctx`` (``u``, ``u_tau``) for the terms
+    that read it.
+
+    Returns column names, the matrix and, per term, ``(effect, shape, column slice)``.
+    """
+    names = list(spec.linear)
+    cols = [signals[LINEAR_SIGNAL[k]] for k in spec.linear]
+    su = signals.with_columns(**ctx) if ctx is not None else signals
+    slices = []
+    for t in spec.terms:
+        eff = get_effect(t.effect)
+        key = (t.effect, tuple(sorted(t.shape.items())))
+        if eff.uses_model:
+            if ctx is None:
+                raise IdentificationError(f"term '{t.effect}' reads u: expected the linear part of a model")
+            m = eff.columns(su, t.shape)
+        elif cache is not None and key in cache:
+            m = cache[key]
+        else:
+            m = eff.columns(signals, t.shape)
+            if cache is not None:
+                cache[key] = m
+        start = len(names)
+        k = m.shape[1]
+        names += [t.effect] if k == 1 else [f"{t.effect}#{i}" for i in range(k)]
+        cols += list(m.T)
+        slices.append((t.effect, t.shape, slice(start, start + k)))
+    if not cols:
+        raise IdentificationError("model has no coefficient: expected a torque or velocity column")
+    return names, np.column_stack(cols), slices
+
+
+def solve(
+    names: list[str],
+    matrix: np.ndarray,
+    target: np.ndarray,
+    loss: Loss,
+    rows: np.ndarray | None,
+    drop_unexcited: bool = False,
+) -> np.ndarray:
+    """Coefficients of ``matrix x ~ target`` on ``rows`` (all if None) for ``loss``; with ``drop_unexcited``,
+    an effect column that is zero or constant on ``rows`` gets coefficient 0 instead of an error (a held-out
+    block may hold every excitation of a rare effect).
+
+    Least squares takes a fast path (normal equations of the column-scaled matrix, with the same refusals as
+    :func:`~servotau.identification.problem.prepare_problem`: too few samples, a zero or constant
+    column, dependent columns); the asymmetric loss goes through
+    :func:`~servotau.identification.fit.fit_with_loss`.
+    """
+    a = matrix if rows is None else matrix[rows]
+    b = target if rows is None else target[rows]
+    if drop_unexcited:
+        n = a.shape[0]
+        ms = np.einsum("ij,ij->j", a, a) / n
+        var = ms - (a.sum(axis=0) / n) ** 2
+        keep = np.array([k in LINEAR_SIGNAL or (ms[j] > 0 and var[j] > 1e-20 * ms[j]) for j, k in enumerate(names)])
+        if not keep.all():
+            x = np.zeros(len(names))
+            x[keep] = solve([k for k, ok in zip(names, keep, strict=True) if ok], matrix[:, keep], target, loss, rows)
+            return x
+    if loss.kind != "least_squares":
+        return fit_with_loss(Regressors(tuple(names), a), b, loss).x
+    n, k = a.shape
+    check_min_samples(n, MIN_SAMPLES_PER_PARAMETER * k, f"fit (coefficients {names})")
+    ms = np.einsum("ij,ij->j", a, a) / n
+    mean = a.sum(axis=0) / n
+    for j in range(k):
+        if not ms[j] > 0.0 or ms[j] - mean[j] ** 2 <= 1e-20 * ms[j]:
+            raise IdentificationError(f"regressor column '{names[j]}' is zero or constant: no excitation")
+    scale = np.sqrt(ms)
+    an = a / scale
+    gram = an.T @ an
+    eig = np.linalg.eigvalsh(gram / n)
+    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
+    if not cond <= MAX_CONDITION:
+        raise IdentificationError(
+            f"regressor columns {names} are linearly dependent (condition number {cond:.3g}): "
+            f"expected <= {MAX_CONDITION:g}"
+        )
+    return np.linalg.solve(gram, an.T @ b) / scale
+
+
+def fold_coefficients(x: np.ndarray, spec: ModelSpec, slices) -> tuple[ModelSpec, dict[str, float]]:
+    """Coefficients by name and the terms with their full shapes (multi-column effects folded)."""
+    coefs = {k: float(x[i]) for i, k in enumerate(spec.linear)}
+    terms = []
+    for effect, shape, sl in slices:
+        c, full = get_effect(effect).folded(x[sl], shape)
+        coefs[effect] = c
+        terms.append(Term(effect, full))
+    return ModelSpec(spec.linear, tuple(terms)), coefs
+
+
+def fit_spec(
+    signals: Signals,
+    target: np.ndarray,
+    spec: ModelSpec,
+    loss: Loss,
+    rows: np.ndarray | None = None,
+    cache: dict | None = None,
+    drop_unexcited: bool = False,
+) -> FittedModel:
+    """Fit ``spec`` (every shape fixed) on ``rows`` with ``loss`` (``drop_unexcited``: see :func:`solve`)."""
+    ctx = None
+    if spec.uses_u:
+        plain = ModelSpec(spec.linear, tuple(t for t in spec.terms if not get_effect(t.effect).uses_model))
+        ctx = fit_spec(signals, target, plain, loss, rows, cache, drop_unexcited).context(signals)
+    if not spec.uses_u:
+        names, a, slices = design(signals, spec, None, cache)
+        full, coefs = fold_coefficients(solve(names, a, target, loss, rows, drop_unexcited), spec, slices)
+        return FittedModel(full, coefs, loss)
+    best, best_err = None, np.inf
+    for _ in range(FIXED_POINT):
+        try:
+            names, a, slices = design(signals, spec, ctx, cache)
+            x = solve(names, a, target, loss, rows, drop_unexcited)
+        except IdentificationError:
+            if best is None:
+                raise
+            break  # this round's u leaves a column unexcited (e.g. a threshold never reached): keep the best
+        full, coefs = fold_coefficients(x, spec, slices)
+        model = FittedModel(full, coefs, loss)
+        err = _loss_value(model.predict(signals), target, loss, rows)
+        if err < best_err:
+            best, best_err = model, err
+        ctx = model.context(signals)
+    return best
+
+
+def _loss_value(model: np.ndarray, target: np.ndarray, loss: Loss, rows: np.ndarray | None) -> float:
+    if rows is not None:
+        model, target = model[rows], target[rows]
+    if loss.kind == "least_squares":
+        return float(np.sum((model - target) ** 2))
+    return asymmetric_cost(model - target, target, loss.w)
+
+
+def resolve_shapes(
+    signals: Signals,
+    target: np.ndarray,
+    spec: ModelSpec,
+    loss: Loss,
+    cache: dict | None = None,
+    sweeps: int = 2,
+    free: list[bool] | None = None,
+) -> ModelSpec:
+    """``spec`` with every shape-less term given the grid shape of least training loss.
+
+    First each shape-less term in order, with the ones before it; then up to ``sweeps - 1`` passes of
+    coordinate descent over the ``free`` terms (default: the shape-less ones), each term's shape chosen
+    again with all the others in the model, until nothing changes (the result then hardly depends on the
+    order of the terms). Other terms keep their shape.
+    """
+    free = [t.shape is None for t in spec.terms] if free is None else list(free)
+    if len(free) != len(spec.terms):
+        raise IdentificationError(f"free = {free}: expected one flag per term of {spec.effect_names}")
+    done: list[Term] = []
+    for t in spec.terms:
+        fixed = t.shape is not None
+        done.append(t if fixed else _best_shape(signals, target, spec.linear, done, t.effect, loss, cache))
+    for _ in range(sweeps - 1):
+        changed = False
+        for i, t in enumerate(done):
+            if not free[i]:
+                continue
+            others = done[:i] + done[i + 1 :]
+            try:
+                best = _best_shape(signals, target, spec.linear, others, t.effect, loss, cache)
+            except IdentificationError:
+                continue  # no other shape fits with these neighbours: keep the current one
+            if best.shape != t.shape:
+                done[i], changed = best, True
+        if not changed:
+            break
+    return ModelSpec(spec.linear, tuple(done))
+
+
+def _best_shape(signals, target, linear, others: list[Term], effect: str, loss: Loss, cache) -> Term:
+    """The shape of ``effect``'s grid of least training loss, fitted with the terms ``others``."""
+    best, err = None, np.inf
+    failures = []
+    eff = get_effect(effect)
+    gsig = signals
+    if eff.uses_model and callable(eff.grid):  # a data-dependent grid may read u: that of the fixed point's start
+        plain = tuple(t for t in others if not get_effect(t.effect).uses_model)
+        gsig = signals.with_columns(**fit_spec(signals, target, ModelSpec(linear, plain), loss,
+                                               cache=cache).context(signals))
+    for shape in eff.grid_for(gsig):
+        trial = ModelSpec(linear, (*others, Term(effect, shape)))
+        try:
+            m = fit_spec(signals, target, trial, loss, cache=cache)
+        except IdentificationError as exc:
+            failures.append(str(exc))
+            continue
+        e = _loss_value(m.predict(signals), target, loss, None)
+        if e < err:
+            best, err = Term(effect, m.spec.terms[-1].shape), e
+    if best is None:
+        raise IdentificationError(f"effect '{effect}': no shape of its grid could be fitted: {failures[0]}")
+    return best

@@ -1,0 +1,209 @@
+"""Evaluate a :class:`~servotau.identification.motor_params.MotorModel` with extra terms, off-line on arrays
+or on-line one control tick at a time (for the feedforward of control/).
+
+Signals each effect needs on-line (``ONLINE_SIGNALS``): the controller gives ``tau`` [N m] (desired or
+estimated torque), ``dq`` [rad/s], ``q`` [rad], ``q_des`` [rad] (the command of this tick), ``t`` [s] and,
+for ``elastic`` and ``backlash``, the estimator's ``ddq`` [rad/s^2] (off-line the workbench filters ``q``
+with the term's ``window``; given ``ddq``, :func:`predict_batch` uses it instead, as on-line). Effects
+with memory (``stiction``, ``thermal_drift``, ``motor_lag``, ``delay``) keep their state in the
+:class:`OnlineModel`; call :meth:`OnlineModel.step` exactly once per tick.
+
+``delay`` reads the command of the current tick: the model is then affine in ``q_des``, and
+:meth:`OnlineModel.command` solves ``q_des = q + model(q_des)`` for the feedforward.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from servotau.errors import IdentificationError
+
+from ..motor_params import MotorModel
+from .effects import get_effect
+from .library import BUILTIN, SCALAR
+from .model import FittedModel
+from .signals import Signals
+
+BASE_SIGNALS = ("tau", "dq")
+BUILTIN_BY_NAME = {e.name: e for e in BUILTIN}
+
+
+def required_signals(model: MotorModel) -> list[str]:
+    """Signals (besides ``tau`` and ``dq``) that evaluating ``model`` needs."""
+    out: list[str] = []
+    for name in model.extra:
+        eff = get_effect(name)
+        for s in eff.signals:
+            s = "ddq" if (s == "q" and name in ("elastic", "backlash")) else s
+            if s not in (*BASE_SIGNALS, "u", "u_tau", "u_v") and s not in out:
+                out.append(s)
+        if eff.history and "t" not in out:
+            out.append("t")
+    return out
+
+
+ONLINE_SIGNALS = {
+    "coulomb": "dq",
+    "coulomb_asym": "dq",
+    "stribeck": "dq",
+    "stiction": "dq (history: a latch of the last direction)",
+    "deadzone": "tau, dq",
+    "direction_gain": "tau, dq",
+    "load_friction": "tau, dq",
+    "backlash": "tau, ddq (the estimator's acceleration)",
+    "cogging": "q",
+    "thermal_drift": "tau, dq (history: a first-order lag of the servo effort)",
+    "saturation": "tau, dq",
+    "elastic": "ddq (the estimator's acceleration)",
+    "motor_lag": "tau, dq (history: a first-order lag)",
+    "delay": "q_des (history: the commands of the last `delay` seconds, and this tick's)",
+}
+"""What the controller must provide for each built-in effect, on top of the paper's ``tau`` and ``dq``."""
+
+
+def predict_batch(
+    model: MotorModel,
+    tau: np.ndarray,
+    dq: np.ndarray,
+    *,
+    q: np.ndarray | None = None,
+    q_des: np.ndarray | None = None,
+    t: np.ndarray | None = None,
+    ddq: np.ndarray | None = None,
+    period: float | None = None,
+    columns: Mapping[str, np.ndarray] | None = None,
+) -> np.ndarray:
+    """``model`` on arrays of samples [rad]; ``period`` [s] defaults to the median step of ``t``.
+
+    Raises:
+        IdentificationError: An effect needs a signal that was not given (the message names both).
+    """
+    tau = np.asarray(tau, dtype=np.float64)
+    dq = np.asarray(dq, dtype=np.float64)
+    n = len(tau)
+    cols: dict[str, np.ndarray] = {**(columns or {}), "tau": tau, "dq": dq}
+    for name, v in (("q", q), ("q_des", q_des), ("t", t), ("ddq", ddq), ("ddq_est", ddq)):
+        if v is not None:
+            cols[name] = np.asarray(v, dtype=np.float64)
+    for name, v in cols.items():
+        if v.shape != (n,):
+            raise IdentificationError(f"signal '{name}': shape {v.shape}: expected ({n},) like tau")
+    if period is None and "t" in cols and n > 1:
+        period = float(np.median(np.diff(cols["t"])))
+    _check_signals(model, cols, period)
+    return FittedModel.from_motor_model(model).predict(Signals(cols, period, n))
+
+
+def _check_signals(model: MotorModel, cols: Mapping[str, object], period: float | None) -> None:
+    for name in model.extra:
+        eff = get_effect(name)
+        need = [s for s in eff.signals if s not in ("u", "u_tau", "u_v")]
+        if name in ("elastic", "backlash") and "q" not in cols:
+            need = [s if s != "q" else "ddq" for s in need]
+        missing = [s for s in need if s not in cols]
+        if missing:
+            raise IdentificationError(
+                f"extra term '{name}' needs signal(s) {missing}: expected them as keyword arguments "
+                f"(on-line: {ONLINE_SIGNALS.get(name, ', '.join(eff.signals))})"
+            )
+        if eff.history and period is None:
+            raise IdentificationError(f"extra term '{name}' has memory: expected the sampling period (or t)")
+
+
+class _Stateless:
+    """An effect without memory, evaluated on the current sample (a scalar formula for built-in effects,
+    else the regressor on one-sample arrays)."""
+
+    def __init__(self, effect, shape: Mapping[str, float], period: float):
+        self.effect, self.shape, self.period = effect, dict(shape), period
+        builtin = BUILTIN_BY_NAME.get(effect.name) is effect  # not replaced by a user effect of the same name
+        self._scalar = SCALAR.get(effect.name) if builtin else None
+
+    def value(self, x: Mapping[str, float]) -> float:
+        if self._scalar is not None:
+            return float(self._scalar(x, **self.shape))
+        cols = {k: np.array([v]) for k, v in x.items()}
+        return float(self.effect.evaluate(Signals(cols, self.period, 1), self.shape)[0])
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        pass
+
+
+class OnlineModel:
+    """A motor model evaluated one tick at a time, with the state of its effects.
+
+    Args:
+        model: The motor model.
+        period: Control period [s].
+    """
+
+    def __init__(self, model: MotorModel, period: float):
+        if not (isinstance(period, (int, float)) and math.isfinite(period) and period > 0):
+            raise IdentificationError(f"period = {period!r}: expected a control period > 0 [s]")
+        self.model = model
+        self.period = float(period)
+        self._fitted = FittedModel.from_motor_model(model)
+        self._terms = []
+        for t in self._fitted.spec.terms:
+            eff = get_effect(t.effect)
+            term = eff.online(t.shape, self.period) if eff.online is not None else _Stateless(eff, t.shape, self.period)
+            self._terms.append((t.effect, eff.uses_model, self._fitted.coefficients[t.effect], term))
+        self.signals = ("tau", "dq", *required_signals(model))
+
+    def _sample(self, tau: float, dq: float, extra: Mapping[str, float]) -> dict[str, float]:
+        x = {"tau": float(tau), "dq": float(dq)}
+        for k, v in extra.items():
+            if v is not None:
+                x[k] = float(v)
+        if "ddq" in x:
+            x["ddq_est"] = x["ddq"]  # the estimator's acceleration, as in the batch evaluation
+        missing = [s for s in self.signals if s not in x]
+        if missing:
+            raise IdentificationError(f"OnlineModel: missing signal(s) {missing}: expected {list(self.signals)}")
+        c = self._fitted.coefficients
+        x["u_tau"] = c["k_tau"] * x["tau"]
+        x["u_v"] = c["k_v"] * x["dq"]
+        x["u"] = x["u_tau"] + x["u_v"]
+        return x
+
+    def _value(self, x: dict[str, float]) -> float:
+        u = x["u"]
+        for _, uses_u, c, term in self._terms:
+            if not uses_u:
+                u += c * term.value(x)
+        x["u"] = u
+        out = u
+        for _, uses_u, c, term in self._terms:
+            if uses_u:
+                out += c * term.value(x)
+        return out
+
+    def predict(self, tau: float, dq: float, **signals: float) -> float:
+        """The model [rad] at this tick, state not advanced."""
+        return self._value(self._sample(tau, dq, signals))
+
+    def step(self, tau: float, dq: float, **signals: float) -> float:
+        """The model [rad] at this tick, then advance the state (once per tick)."""
+        x = self._sample(tau, dq, signals)
+        out = self._value(x)
+        for *_, term in self._terms:
+            term.commit(x)
+        return out
+
+    def command(self, q: float, tau: float, dq: float, **signals: float) -> float:
+        """The command ``q_des`` [rad] with ``q_des - q = model(q_des)`` (the model is affine in ``q_des``),
+        and advance the state with it."""
+        if "q_des" not in self.signals:
+            q_des = q + self.predict(tau, dq, q=q, **signals)
+        else:
+            a = self.predict(tau, dq, q=q, q_des=q, **signals)
+            b = self.predict(tau, dq, q=q, q_des=q + 1.0, **signals)
+            slope = b - a
+            if abs(1.0 - slope) < 1e-9:
+                raise IdentificationError("model slope in q_des is 1: the command cannot be solved for")
+            q_des = q + a / (1.0 - slope)
+        self.step(tau, dq, q=q, q_des=q_des, **signals)
+        return q_des

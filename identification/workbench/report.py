@@ -1,0 +1,245 @@
+"""Static report: one HTML page with PNG plots (matplotlib, Agg backend) that a person can open.
+
+``write_report(out_dir, ...)`` writes ``index.html`` and the PNG files next to it:
+``timeseries.png`` (measurement and models), ``residual_velocity.png``, ``residual_torque.png``,
+``residual_position.png``, ``residual_time.png``, ``heatmap.png``, ``correlation.png``,
+``ranking.png`` and ``ladder.png`` (those that apply).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .data import Dataset, describe
+from .diagnose import Diagnosis
+from .evaluate import Comparison, Metrics
+from .excitation import excitation_report
+from .ladder import Ladder
+from .views import ResidualViews, residual_views
+
+URAD = 1e6  # plots in micro-radians
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path) -> str:
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    _plt().close(fig)
+    return path.name
+
+
+def _plot_timeseries(ds: Dataset, models: Sequence[tuple[str, Comparison]], path: Path) -> str:
+    plt = _plt()
+    fig, (a, b) = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    t = ds.time
+    step = max(1, ds.n // 20000)
+    a.plot(t[::step], URAD * ds.target[::step], "k", lw=0.8, label="measured")
+    for label, c in models:
+        pred = c.heldout_prediction if c.heldout_prediction is not None else c.prediction
+        a.plot(t[::step], URAD * pred[::step], lw=0.8, label=f"{label} (held-out)")
+        b.plot(t[::step], URAD * (ds.target - pred)[::step], lw=0.6, label=label)
+    a.set_ylabel("dq_err [urad]")
+    a.legend(fontsize=7, loc="upper right")
+    b.set_ylabel("residual [urad]")
+    b.set_xlabel("time [s]" if ds.dt else "sample")
+    return _save(fig, path)
+
+
+def _band(ax, b, label):
+    ax.plot(b.centre, URAD * b.mean, ".-", label=label)
+    ax.fill_between(b.centre, URAD * (b.mean - b.std), URAD * (b.mean + b.std), alpha=0.15)
+
+
+def _plot_views(views: Sequence[tuple[str, ResidualViews]], out: Path) -> dict[str, str]:
+    plt = _plt()
+    files = {}
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for label, v in views:
+        for side, b in v.velocity.items():
+            _band(ax, b, f"{label} {side}")
+    ax.set_xscale("symlog", linthresh=1e-3)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set(xlabel="velocity [rad/s] (symlog)", ylabel="residual [urad]", title="residual against velocity")
+    ax.legend(fontsize=7)
+    files["velocity"] = _save(fig, out / "residual_velocity.png")
+    if views[0][1].torque is not None:
+        fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 4), squeeze=False)
+        for ax, (label, v) in zip(axes[0], views, strict=True):
+            for side, b in v.torque.items():
+                _band(ax, b, side)
+            ax.axhline(0, color="k", lw=0.5)
+            ax.set(xlabel="torque [N m]", ylabel="residual [urad]", title=f"{label}: against torque")
+            ax.legend(fontsize=7)
+        files["torque"] = _save(fig, out / "residual_torque.png")
+    if views[0][1].position is not None:
+        fig, ax = plt.subplots(figsize=(8, 3.5))
+        for label, v in views:
+            _band(ax, v.position, label)
+        ax.set(xlabel="position [rad]", ylabel="residual [urad]", title="residual against position")
+        ax.legend(fontsize=7)
+        files["position"] = _save(fig, out / "residual_position.png")
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    for label, v in views:
+        _band(ax, v.time, label)
+    ax.set(xlabel="time [s]", ylabel="residual [urad]", title="residual against time (window means)")
+    ax.legend(fontsize=7)
+    files["time"] = _save(fig, out / "residual_time.png")
+    if views[0][1].heatmap is not None:
+        fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 4.2), squeeze=False)
+        lim = max(np.nanmax(np.abs(v.heatmap)) for _, v in views) * URAD
+        for ax, (label, v) in zip(axes[0], views, strict=True):
+            im = ax.pcolormesh(v.heatmap_dq_edges, v.heatmap_tau_edges, URAD * v.heatmap.T, cmap="RdBu_r",
+                               vmin=-lim, vmax=lim)
+            ax.set(xlabel="velocity [rad/s]", ylabel="torque [N m]", title=f"{label}: mean residual [urad]")
+            fig.colorbar(im, ax=ax)
+        files["heatmap"] = _save(fig, out / "heatmap.png")
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 3.5))
+    for label, v in views:
+        lag = v.lags[v.lags >= 0]
+        a.plot(lag, v.autocorrelation, label=label)
+        for name, c in v.crosscorrelation.items():
+            b.plot(v.lags, c, label=f"{label}: {name}")
+    a.set(xlabel="lag [s]", ylabel="autocorrelation", title="residual autocorrelation")
+    b.set(xlabel="lag [s] (> 0: input leads)", ylabel="correlation", title="residual-input cross-correlation")
+    a.legend(fontsize=7)
+    b.legend(fontsize=6)
+    files["correlation"] = _save(fig, out / "correlation.png")
+    return files
+
+
+def _plot_ranking(d: Diagnosis, path: Path) -> str:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(9, 4))
+    names = [c.effect for c in d.ranking] + [f"probe:{k}" for k in d.probes]
+    gains = [c.heldout_gain if np.isfinite(c.heldout_gain) else 0.0 for c in d.ranking] + list(d.probes.values())
+    colors = ["C0" if c.testable else "0.7" for c in d.ranking] + ["C2"] * len(d.probes)
+    ax.bar(range(len(names)), [100 * g for g in gains], color=colors)
+    ax.axhline(100 * d.min_gain, color="r", lw=0.8, ls="--", label=f"min_gain {100 * d.min_gain:.0f} %")
+    ax.set_xticks(range(len(names)), names, rotation=60, ha="right", fontsize=8)
+    ax.set(ylabel="held-out gain [%]", title="effects (blue; grey: untestable) and probes (green)")
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def _plot_ladder(lad: Ladder, path: Path) -> str:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    x = range(len(lad.rungs))
+    ax.plot(x, [URAD * r.comparison.train.rms for r in lad.rungs], "o-", label="training")
+    ax.plot(x, [URAD * r.comparison.heldout.rms for r in lad.rungs], "s-", label="held-out")
+    ax.set_xticks(list(x), [r.added or "base" for r in lad.rungs])
+    ax.set(ylabel="RMS [urad]", title="ladder: error after each added effect")
+    ax.set_ylim(bottom=0)
+    ax.legend()
+    return _save(fig, path)
+
+
+def _metrics_row(label: str, m: Metrics | None) -> str:
+    if m is None:
+        return f"<tr><td>{html.escape(label)}</td><td colspan=4>-</td></tr>"
+    return (f"<tr><td>{html.escape(label)}</td><td>{m.fit_percent:.1f}</td><td>{URAD * m.rms:.2f}</td>"
+            f"<td>{URAD**2 * m.asymmetric_loss:.3g}</td><td>{100 * m.overestimation_rate:.1f}</td></tr>")
+
+
+def _table(rows: list[list[str]], head: list[str]) -> str:
+    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{th}</tr>{body}</table>"
+
+
+def write_report(
+    out_dir: str | Path,
+    ds: Dataset,
+    *,
+    comparison: Comparison | None = None,
+    diagnosis: Diagnosis | None = None,
+    ladder: Ladder | None = None,
+    title: str = "servotau model workbench",
+    summary: dict | None = None,
+) -> Path:
+    """Write ``index.html`` and its plots into ``out_dir``; return the HTML path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    models: list[tuple[str, Comparison]] = []
+    if ladder is not None:
+        models = [(ladder.rungs[0].label, ladder.rungs[0].comparison)]
+        if len(ladder.rungs) > 1:
+            models.append((ladder.rungs[-1].label, ladder.rungs[-1].comparison))
+        diagnosis = diagnosis or ladder.diagnoses[-1]
+    elif diagnosis is not None:
+        models = [(diagnosis.base.model.spec.label(), diagnosis.base)]
+    elif comparison is not None:
+        models = [(comparison.model.spec.label(), comparison)]
+    parts = [f"<h1>{html.escape(title)}</h1>", "<p>" + "<br>".join(html.escape(x) for x in describe(ds)) + "</p>"]
+    if diagnosis is not None:
+        parts.append(f"<h2>Verdict: {html.escape(diagnosis.verdict)}</h2><p>{html.escape(diagnosis.message)}</p>")
+    parts.append("<h2>Model against measurement</h2>")
+    rows = []
+    for label, c in models:
+        rows.append(_metrics_row(f"{label} (training)", c.train))
+        rows.append(_metrics_row(f"{label} (held-out)", c.heldout))
+    parts.append("<table><tr><th>model</th><th>fit [%]</th><th>RMS [urad]</th><th>asymmetric loss [urad^2]</th>"
+                 "<th>over-estimation [%]</th></tr>" + "".join(rows) + "</table>")
+    for label, c in models:
+        parts.append(f"<p><b>{html.escape(label)}</b>: " + html.escape("; ".join(c.model.describe())) + "</p>")
+    files = {"timeseries": _plot_timeseries(ds, models, out / "timeseries.png")}
+    if ladder is not None and len(ladder.rungs) > 1:
+        files["ladder"] = _plot_ladder(ladder, out / "ladder.png")
+        rows = [[html.escape(r.label), html.escape(r.added or "-"), f"{URAD * r.comparison.train.rms:.2f}",
+                 f"{URAD * r.comparison.heldout.rms:.2f}", f"{r.comparison.heldout.fit_percent:.1f}"]
+                for r in ladder.rungs]
+        parts += ["<h2>Ladder</h2>", _table(rows, ["model", "added", "training RMS [urad]", "held-out RMS [urad]",
+                                                   "held-out fit [%]"]), f'<img src="{files["ladder"]}">']
+    parts.append(f'<h2>Time series</h2><img src="{files["timeseries"]}">')
+    views = [(label, residual_views(ds, c.residual)) for label, c in models]
+    vfiles = _plot_views(views, out)
+    parts.append("<h2>Where the model fails (held-out residuals)</h2>")
+    parts += [f'<img src="{f}">' for f in vfiles.values()]
+    if diagnosis is not None:
+        files["ranking"] = _plot_ranking(diagnosis, out / "ranking.png")
+        rows = []
+        for c in diagnosis.ranking:
+            shape = ", ".join(f"{k}={v:.3g}" for k, v in c.shape.items())
+            note = "partially explained" if c.partial else ("grid edge" if c.at_grid_edge else "")
+            rows.append([c.effect, f"{100 * c.heldout_gain:.1f}" if c.testable else "-",
+                         f"{100 * c.train_gain:.1f}" if c.testable else "-", html.escape(shape),
+                         "yes" if c.consistent else "no", "yes" if c.testable else html.escape(c.reason or ""),
+                         "-" if c.explained is None else f"{100 * c.explained:.0f}", note])
+        parts += [f"<h2>Ranking of the missing effects (against {html.escape(diagnosis.base.model.spec.label())})</h2>",
+                  _table(rows, ["effect", "held-out gain [%]", "training gain [%]", "shape", "all blocks",
+                                "testable", "of probe [%]", "note"]),
+                  f'<img src="{files["ranking"]}">',
+                  "<p>Probes (free functions of one family of signals), held-out gain: "
+                  + ", ".join(f"{k} {100 * v:.1f} %" for k, v in diagnosis.probes.items()) + "</p>"]
+        if diagnosis.confusion is not None:
+            cf = diagnosis.confusion
+            parts.append(f"<p><b>Confusable</b>: {cf.effects[0]} and {cf.effects[1]} (column correlation "
+                         f"{cf.correlation:.2f}). Experiment: {html.escape(cf.experiment)}</p>")
+        for other, text in diagnosis.experiments.items():
+            parts.append(f"<p>To tell it from <b>{html.escape(other)}</b>: {html.escape(text)}</p>")
+        exc = diagnosis.excitation
+    else:
+        exc = excitation_report(ds.signals)
+    parts.append("<h2>Excitation</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in exc.lines()) + "</ul>")
+    if summary is not None:
+        parts.append("<h2>JSON</h2><pre>" + html.escape(json.dumps(summary, indent=1)[:20000]) + "</pre>")
+    style = ("<style>body{font-family:sans-serif;max-width:1200px;margin:auto}table{border-collapse:collapse}"
+             "td,th{border:1px solid #bbb;padding:2px 6px;font-size:13px}img{max-width:100%}</style>")
+    page = f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>{style}</head>"
+    page += "<body>" + "\n".join(parts) + "</body></html>\n"
+    path = out / "index.html"
+    path.write_text(page, encoding="utf-8")
+    return path

@@ -1,0 +1,107 @@
+"""The signals an effect regressor reads, and the causal filters shared by batch and on-line evaluation.
+
+An effect is a function of :class:`Signals`, a read-only mapping from signal name to a 1-D array
+(one sample per tick). Standard names:
+
+- ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], ``dq`` [rad/s], ``ddq`` [rad/s^2];
+- ``u`` [rad]: the linear part of the current model, ``k_tau tau + k_v dq``: the servo error the paper's
+  model expects (dead zone, direction gain, saturation and thermal drift act on it);
+- every other column of the log, under its own name (for user-defined effects).
+
+Filters with memory (delays, first-order lags, the direction latch) are written as one-step
+recursions, evaluated here over a whole array and by :mod:`~servotau.identification.workbench.online`
+one sample at a time, so both give the same numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+
+import numpy as np
+from scipy.signal import lfilter
+
+from servotau.errors import IdentificationError
+
+STANDARD = ("t", "q", "q_des", "tau", "dq", "ddq", "u")
+
+
+class Signals(Mapping[str, np.ndarray]):
+    """Named 1-D signals of equal length, sampled every ``dt`` seconds (None if unknown).
+
+    Entries can be given lazily as zero-argument callables; they are computed on first access.
+    """
+
+    def __init__(
+        self,
+        columns: Mapping[str, np.ndarray | Callable[[], np.ndarray]],
+        dt: float | None,
+        n: int,
+    ):
+        self._cols = dict(columns)
+        self.dt = dt
+        self.n = int(n)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._cols:
+            raise IdentificationError(f"signal '{name}' is not available: expected one of {sorted(self._cols)}")
+        v = self._cols[name]
+        if callable(v):
+            v = np.asarray(v(), dtype=np.float64)
+            self._cols[name] = v
+        return v
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._cols
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._cols)
+
+    def __len__(self) -> int:
+        return len(self._cols)
+
+    def with_columns(self, **columns: np.ndarray | Callable[[], np.ndarray]) -> Signals:
+        """A copy with ``columns`` added or replaced (e.g. ``u`` of another model)."""
+        return Signals({**self._cols, **columns}, self.dt, self.n)
+
+    def require_dt(self, what: str) -> float:
+        """The sampling period [s], or raise naming ``what`` needs it."""
+        if self.dt is None:
+            raise IdentificationError(f"{what}: needs a sampling period: expected a time column in the log")
+        return self.dt
+
+
+def ticks(seconds: float, dt: float) -> int:
+    """``seconds`` as a whole number of samples (at least 1)."""
+    return max(1, int(round(seconds / dt)))
+
+
+def delayed(x: np.ndarray, n: int) -> np.ndarray:
+    """``x`` delayed by ``n`` samples, the first value repeated before the start."""
+    if n <= 0:
+        return x.copy()
+    if n >= len(x):
+        return np.full_like(x, x[0])
+    return np.concatenate([np.full(n, x[0]), x[:-n]])
+
+
+def lowpass_gain(time_constant: float, dt: float) -> float:
+    """Gain ``a`` of ``y += a (x - y)``, the backward-Euler first-order lag of ``time_constant`` [s]."""
+    return dt / (time_constant + dt)
+
+
+def lowpass(x: np.ndarray, time_constant: float, dt: float, y0: float | None = None) -> np.ndarray:
+    """First-order lag ``y[k] = y[k-1] + a (x[k] - y[k-1])`` with ``y[-1] = y0`` (default ``x[0]``)."""
+    a = lowpass_gain(time_constant, dt)
+    y0 = float(x[0]) if y0 is None else y0
+    y, _ = lfilter([a], [1.0, -(1.0 - a)], x, zi=[(1.0 - a) * y0])
+    return y
+
+
+def direction_latch(dq: np.ndarray, threshold: float) -> np.ndarray:
+    """Sign of the last velocity with ``|dq| > threshold`` [rad/s] (0 before any motion)."""
+    moving = np.abs(dq) > threshold
+    idx = np.where(moving, np.arange(len(dq)), -1)
+    np.maximum.accumulate(idx, out=idx)
+    out = np.sign(dq[np.maximum(idx, 0)])
+    out[idx < 0] = 0.0
+    return out

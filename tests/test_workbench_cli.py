@@ -1,0 +1,128 @@
+"""Tests of ``servotau model compare|diagnose|add`` (identification/workbench/app.py), report and Rerun."""
+
+import json
+
+import numpy as np
+import pytest
+from test_workbench_diagnose import cogging_truth, synthetic_table
+
+from servotau.cli import main
+from servotau.identification import MotorParameters
+from servotau.identification.workbench.data import write_table
+
+
+@pytest.fixture(scope="module")
+def cogging_log(tmp_path_factory):
+    return write_table(synthetic_table(cogging_truth, seconds=6.0), tmp_path_factory.mktemp("logs") / "cog.parquet")
+
+
+def run_json(capsys, argv):
+    code = main(argv)
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out), err
+
+
+def test_diagnose_json_is_one_object_with_verdict_and_ranking(capsys, cogging_log):
+    """--json prints exactly one JSON object: verdict, ranking entries with effect and heldout_gain."""
+    out, err = run_json(capsys, ["model", "diagnose", str(cogging_log), "--base", "coulomb", "--json"])
+    assert out["verdict"] == "missing_effect" and out["ranking"][0]["effect"] == "cogging"
+    assert all({"effect", "heldout_gain"} <= set(r) for r in out["ranking"])
+    assert out["ranking"][0]["heldout_gain"] > 0.8 and "[" in err and "cogging" in err  # progress on stderr
+
+
+def test_add_prints_the_ladder_and_saves_the_motor_model(capsys, cogging_log, tmp_path):
+    """add --json: a ladder of models with held-out RMS falling; --save writes a loadable motor file."""
+    path = tmp_path / "motors.toml"
+    out, _ = run_json(capsys, ["model", "add", str(cogging_log), "--base", "coulomb", "--json", "--save", str(path),
+                               "--quiet"])
+    ladder = out["ladder"]
+    assert [r["added"] for r in ladder] == [None, "cogging"] and out["verdict"] == "no_missing_effect"
+    assert ladder[1]["heldout_rms"] < 0.2 * ladder[0]["heldout_rms"] and all("model" in r for r in ladder)
+    m = MotorParameters.load_toml(path)["joint"]
+    assert "cogging" in m.extra and m.extra["cogging"].shape["period"] == pytest.approx(0.08)
+
+
+def test_add_named_effect_with_the_asymmetric_loss(capsys, cogging_log):
+    """--effect adds that effect (same loss: asymmetric); unknown effect names fail cleanly."""
+    out, _ = run_json(capsys, ["model", "add", str(cogging_log), "--base", "coulomb", "--effect", "cogging",
+                               "--loss", "asymmetric", "--w", "10", "--effects", "stribeck,cogging,deadzone",
+                               "--json", "--quiet"])
+    assert out["ladder"][-1]["added"] == "cogging" and "asymmetric" in out["loss"]
+    assert main(["model", "add", str(cogging_log), "--effect", "cogs", "--quiet"]) == 2
+    assert "unknown effect(s) ['cogs']" in capsys.readouterr().err
+
+
+def test_compare_writes_the_html_report_and_a_rerun_recording(capsys, cogging_log, tmp_path):
+    """compare --report DIR --rerun save:FILE: an HTML page with its PNG plots, and an .rrd file."""
+    rrd = tmp_path / "wb.rrd"
+    out, _ = run_json(capsys, ["model", "compare", str(cogging_log), "--base", "coulomb", "--report",
+                               str(tmp_path / "rep"), "--rerun", f"save:{rrd}", "--json", "--quiet"])
+    html = (tmp_path / "rep" / "index.html").read_text()
+    for png in ("timeseries", "residual_velocity", "residual_torque", "residual_position", "residual_time",
+                "heatmap", "correlation", "ranking"):
+        assert (tmp_path / "rep" / f"{png}.png").stat().st_size > 1000 and f"{png}.png" in html
+    assert rrd.stat().st_size > 10_000
+    assert out["heldout"]["fit_percent"] < out["train"]["fit_percent"] + 1.0 and "verdict" in out
+
+
+def test_compare_a_saved_model_file(capsys, cogging_log, tmp_path):
+    """compare --model evaluates a motor-parameter file as it is (no refit, nothing held out)."""
+    path = tmp_path / "m.toml"
+    run_json(capsys, ["model", "add", str(cogging_log), "--base", "coulomb", "--effect", "cogging", "--save",
+                      str(path), "--json", "--quiet"])
+    out, _ = run_json(capsys, ["model", "compare", str(cogging_log), "--model", str(path), "--json", "--quiet"])
+    assert out["heldout"] is None and out["train"]["fit_percent"] > 99.0
+
+
+def test_plugin_effect_and_column_mapping(capsys, tmp_path):
+    """--plugin registers a user effect; --map brings a table with other column names."""
+    cols = synthetic_table(lambda t, q, dq, tau: 3e-4 * np.exp(-(((tau - 12.0) / 3.0) ** 2)), seconds=6.0)
+    log = write_table({"time": cols["t"], "angle": cols["q"], "cmd": cols["q_des"], "torque": cols["tau"]},
+                      tmp_path / "other.csv")
+    plugin = tmp_path / "bump.py"
+    plugin.write_text(
+        "import numpy as np\n"
+        "from servotau.identification.workbench import register_effect\n"
+        "register_effect('bump', lambda s, c: np.exp(-((s['tau'] - c) / 3.0) ** 2),"
+        " grid=[{'c': 6.0}, {'c': 12.0}], signals=('tau',), family='torque', replace=True)\n"
+    )
+    out, _ = run_json(capsys, ["model", "diagnose", str(log), "--map", "time=time", "--map", "position=angle",
+                               "--map", "command=cmd", "--map", "torque=torque", "--plugin", str(plugin),
+                               "--base", "coulomb", "--json", "--quiet"])
+    assert out["ranking"][0]["effect"] == "bump" and out["ranking"][0]["shape"] == {"c": 12.0}
+    from servotau.identification.workbench import unregister_effect
+
+    unregister_effect("bump")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--map", "torque=force"], "column 'force' (role torque): not in the table"),
+        (["--map", "torque"], "--map 'torque': expected ROLE=COLUMN"),
+        (["--base", "coulomb+magic"], "unknown effect 'magic'"),
+        (["--effects", "cogging,magic"], "--effects: unknown effect(s) ['magic']"),
+        (["--folds", "1"], "--folds 1: expected at least 2"),
+        (["--plugin", "/nonexistent.py"], "--plugin /nonexistent.py: file not found"),
+        (["--rerun", "nowhere"], "--rerun 'nowhere': expected save:FILE"),
+    ],
+)
+def test_bad_input_is_a_clean_error(capsys, cogging_log, argv, message):
+    """Bad options and columns end with exit code 2 and a message naming the field, never a traceback."""
+    assert main(["model", "diagnose", str(cogging_log), "--quiet", *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_missing_column_and_nan_rows(capsys, tmp_path):
+    """A table without q_des is refused naming it; NaN rows are dropped and counted in the JSON."""
+    cols = synthetic_table(seconds=3.0)
+    bad = write_table({k: v for k, v in cols.items() if k != "q_des"}, tmp_path / "bad.csv")
+    assert main(["model", "compare", str(bad), "--quiet"]) == 2
+    assert "missing column(s) ['q_des']" in capsys.readouterr().err
+    cols["tau"][[5, 50, 500]] = np.nan
+    nan = write_table(cols, tmp_path / "nan.parquet")
+    out, _ = run_json(capsys, ["model", "diagnose", str(nan), "--base", "coulomb", "--json", "--quiet",
+                               "--effects", "cogging"])
+    assert out["data"]["dropped_rows"] == 3 and "dropped 3 of 3000 rows" in out["data"]["notes"][0]

@@ -1,0 +1,108 @@
+"""Tests of log loading (identification/workbench/data.py): layouts, column roles, bad input."""
+
+import numpy as np
+import pytest
+from test_workbench_diagnose import synthetic_table
+
+from servotau.errors import IdentificationError
+from servotau.identification.workbench import diagnose, load_dataset, parse_spec
+from servotau.identification.workbench.data import align_torque, shifted, write_table
+
+
+def test_single_joint_table_from_parquet_and_csv_without_velocity(tmp_path):
+    """t, q, q_des, tau work as they are; dq is the centred SG derivative of q; both formats agree."""
+    cols = synthetic_table(seconds=3.0)
+    true_dq = cols.pop("dq")
+    for suffix in (".parquet", ".csv"):
+        ds = load_dataset(write_table(cols, tmp_path / f"log{suffix}"))
+        assert ds.roles["position"] == "q" and ds.roles["torque"] == "tau" and "velocity" not in ds.roles
+        np.testing.assert_allclose(ds.target, cols["q_des"] - cols["q"], atol=1e-12)
+        inner = slice(100, -100)
+        err = ds.signals["dq"][inner] - true_dq[inner]
+        assert np.sqrt(np.mean(err**2)) < 0.01 * np.sqrt(np.mean(true_dq**2))  # q is a cumulative sum of dq
+        assert ds.dt == pytest.approx(1e-3) and any("Savitzky-Golay derivative" in n for n in ds.notes)
+
+
+def test_servotau_log_layout_needs_a_joint_and_prefers_the_estimate():
+    """q/<joint>, q_des/<joint>, est/tau/<joint> (over true/tau), est/dq/<joint>; --joint picks one."""
+    c = synthetic_table(seconds=2.0)
+    log = {"t": c["t"]}
+    for j, k in (("RLEG_JOINT3", 1.0), ("RLEG_JOINT2", 2.0)):
+        log |= {f"q/{j}": k * c["q"], f"q_des/{j}": k * c["q_des"], f"est/tau/{j}": c["tau"],
+                f"true/tau/{j}": 2 * c["tau"], f"est/dq/{j}": k * c["dq"]}
+    with pytest.raises(IdentificationError, match=r"joints \['RLEG_JOINT3', 'RLEG_JOINT2'\]: expected --joint"):
+        load_dataset(log)
+    with pytest.raises(IdentificationError, match="joint 'LLEG_JOINT3': not in the log"):
+        load_dataset(log, joint="LLEG_JOINT3")
+    ds = load_dataset(log, joint="RLEG_JOINT2")
+    assert ds.roles["torque"] == "est/tau/RLEG_JOINT2" and ds.roles["velocity"] == "est/dq/RLEG_JOINT2"
+    np.testing.assert_allclose(ds.target, 2 * (c["q_des"] - c["q"]))
+    truth = load_dataset(log, joint="RLEG_JOINT3", roles={"torque": "true/tau/RLEG_JOINT3"})
+    np.testing.assert_allclose(truth.signals["tau"][50:-50], 2 * c["tau"][50:-50], rtol=1e-3, atol=1e-3)
+
+
+def test_role_mapping_brings_another_robots_friction_table():
+    """A friction torque against velocity (other names, no torque, no command) is diagnosed as it is."""
+    rng = np.random.default_rng(1)
+    v = np.concatenate([np.linspace(-1, 1, 2000), np.linspace(1, -1, 2000)])
+    friction = 0.8 * v + 2.0 * np.tanh(v / 0.01) + 0.01 * rng.standard_normal(len(v))  # [N m]
+    ds = load_dataset({"speed": v, "friction": friction, "block": np.repeat(np.arange(4), 1000)},
+                      roles={"target": "friction", "velocity": "speed", "segment": "block"})
+    assert not ds.has_torque and not ds.actuator
+    d = diagnose(ds, parse_spec("paper", ds.signals), effects=["coulomb", "stribeck", "cogging"])
+    assert d.top.effect == "coulomb" and d.top.heldout_gain > 0.9
+    assert not d.candidate("cogging").testable  # no position column: untestable, not absent
+
+
+def test_nan_rows_are_dropped_and_counted():
+    """Rows with NaN in a used column are dropped; the count is reported; unused columns do not matter."""
+    cols = synthetic_table(seconds=2.0)
+    cols["tau"][[10, 500, 900]] = np.nan
+    cols["q"][1500] = np.inf
+    cols["notes"] = np.full(len(cols["t"]), np.nan)
+    ds = load_dataset(cols)
+    assert ds.n_dropped == 4 and ds.n == len(cols["t"]) - 4
+    assert any("dropped 4 of 2000 rows" in n and "'q'" in n and "'tau'" in n for n in ds.notes)
+
+
+def test_bad_input_names_the_column_and_the_expected_value(tmp_path):
+    """Missing column, unknown role or column, too few samples, non-increasing time: clear errors."""
+    cols = synthetic_table(seconds=2.0)
+    with pytest.raises(IdentificationError, match=r"missing column\(s\) \['q_des'\].*t, q, q_des, tau"):
+        load_dataset({k: v for k, v in cols.items() if k != "q_des"})
+    with pytest.raises(IdentificationError, match="column role 'torq': expected one of"):
+        load_dataset(cols, roles={"torq": "tau"})
+    with pytest.raises(IdentificationError, match="column 'force' \\(role torque\\): not in the table"):
+        load_dataset(cols, roles={"torque": "force"})
+    with pytest.raises(IdentificationError, match="50 valid samples.*expected at least 200"):
+        load_dataset({k: v[:50] for k, v in cols.items()})
+    bad = dict(cols)
+    bad["t"] = cols["t"].copy()
+    bad["t"][100] = bad["t"][99]
+    with pytest.raises(IdentificationError, match="column 't' \\(role time\\): not increasing at row 100"):
+        load_dataset(bad)
+    allnan = dict(cols, tau=np.full(len(cols["t"]), np.nan))
+    with pytest.raises(IdentificationError, match="column 'tau' \\(role torque\\): all 2000 values are NaN"):
+        load_dataset(allnan)
+    with pytest.raises(IdentificationError, match="not found"):
+        load_dataset(tmp_path / "missing.parquet")
+    (tmp_path / "log.json").write_text("{}")
+    with pytest.raises(IdentificationError, match="unknown format '.json'"):
+        load_dataset(tmp_path / "log.json")
+
+
+def test_torque_alignment_finds_an_estimator_delay():
+    """A torque column late by 8 ms is re-timed from the holds (where the command is still)."""
+    cols = synthetic_table(seconds=8.0)
+    still = np.abs(np.gradient(cols["q_des"])) < 1e-12
+    assert still.mean() < 0.1  # the synthetic command never holds: nothing is shifted
+    ds, shift = align_torque(load_dataset(cols))
+    assert shift == 0.0
+    # the command holds still while a push moves the torque: the joint deflects, dq_err = k_tau tau
+    t = cols["t"]
+    tau = 30 * np.sin(2 * np.pi * 0.5 * t) + 10 * np.sin(2 * np.pi * 1.7 * t)
+    q = 0.3 - 5e-5 * tau
+    static = {"t": t, "q": q, "q_des": np.full(len(t), 0.3), "tau": shifted(tau, -8)}
+    ds2, shift2 = align_torque(load_dataset(static, smooth_torque_s=0.0))
+    assert shift2 == pytest.approx(0.008)
+    assert any("advanced by 8 ms" in n for n in ds2.notes)

@@ -1,0 +1,133 @@
+"""Tests of the workbench model, the motor-parameter file with extra terms and the on-line evaluation
+(identification/workbench/model.py, online.py, effects.py; MotorModel.predict/online)."""
+
+import numpy as np
+import pytest
+from test_workbench_diagnose import synthetic_table
+
+from servotau.errors import IdentificationError
+from servotau.identification import EffectTerm, MotorModel, MotorParameters
+from servotau.identification.workbench import (
+    Effect,
+    FittedModel,
+    ModelSpec,
+    Term,
+    effect_names,
+    fit_spec,
+    get_effect,
+    load_dataset,
+    register_effect,
+)
+from servotau.identification.workbench.ladder import add_effects, save_model
+from servotau.identification.workbench.online import ONLINE_SIGNALS, OnlineModel
+
+LIBRARY = ("coulomb", "coulomb_asym", "stribeck", "stiction", "deadzone", "direction_gain", "backlash",
+           "load_friction", "cogging", "thermal_drift", "saturation", "elastic", "motor_lag", "delay")
+
+SHAPES = {
+    "coulomb": {"v_eps": 0.01}, "coulomb_asym": {"v_eps": 0.02}, "stribeck": {"v_s": 0.08, "v_eps": 0.01},
+    "stiction": {"v_th": 0.01}, "deadzone": {"band": 3e-4, "damping_share": 0.67},
+    "direction_gain": {"v_eps": 0.02}, "backlash": {"window": 0.011, "tau_band": 5.0, "gain": 1.0},
+    "load_friction": {"v_eps": 0.02}, "cogging": {"period": 0.08, "phase": 0.3}, "thermal_drift": {"tau_th": 30.0},
+    "saturation": {"u_sat": 2e-3, "damping_share": 0.67}, "elastic": {"window": 0.011},
+    "motor_lag": {"time_constant": 0.01}, "delay": {"delay": 0.005},
+}
+
+
+def model_with(*effects) -> MotorModel:
+    coefs = {"coulomb": 1e-4, "stribeck": 2e-4, "cogging": 1e-4, "deadzone": 1e-4, "direction_gain": -0.05,
+             "delay": 0.5, "motor_lag": 0.3, "thermal_drift": 1e-4, "stiction": 5e-5, "elastic": 3e-5,
+             "backlash": 3e-5, "load_friction": 2e-6, "coulomb_asym": 5e-5, "saturation": 2e-4}
+    extra = {e: EffectTerm(coefs[e], SHAPES[e]) for e in effects}
+    return MotorModel(k_tau=5e-5, k_v=6e-3, k_c=None if "coulomb" in effects else 1e-4, extra=extra,
+                      provenance="test")
+
+
+def signals(seconds=2.0):
+    c = synthetic_table(seconds=seconds)
+    ddq = np.gradient(c["dq"], 1e-3)
+    return c, ddq
+
+
+def test_library_has_every_effect_of_the_issue_with_docs():
+    """All fourteen effects are registered, each with a signature, a family and its on-line signals."""
+    assert set(LIBRARY) <= set(effect_names())
+    for name in LIBRARY:
+        e = get_effect(name)
+        assert e.signature and e.description and name in ONLINE_SIGNALS
+
+
+def test_motor_model_predict_evaluates_extra_terms_through_the_registry():
+    """MotorModel.predict with extra terms equals the workbench model; a missing signal is named."""
+    c, ddq = signals()
+    m = model_with(*SHAPES)
+    pred = m.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq)
+    assert pred.shape == c["tau"].shape and np.all(np.isfinite(pred))
+    with pytest.raises(IdentificationError, match=r"extra term 'cogging' needs signal\(s\) \['q'\]"):
+        model_with("cogging").predict(c["tau"], c["dq"])
+    plain = MotorModel(k_tau=5e-5, k_v=6e-3, k_c=1e-4, provenance="test")
+    expected = 5e-5 * c["tau"] + 6e-3 * c["dq"] + 1e-4 * np.sign(c["dq"])
+    np.testing.assert_allclose(plain.predict(c["tau"], c["dq"]), expected)
+
+
+@pytest.mark.parametrize("effect", LIBRARY)
+def test_online_evaluation_matches_the_batch_one(effect):
+    """Tick by tick (effects with memory keep their state), the on-line model equals MotorModel.predict."""
+    c, ddq = signals(1.0)
+    m = model_with(effect)
+    batch = m.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq, period=1e-3)
+    online = m.online(1e-3)
+    ticks = [online.step(c["tau"][k], c["dq"][k], q=c["q"][k], q_des=c["q_des"][k], t=c["t"][k], ddq=ddq[k])
+             for k in range(len(c["t"]))]
+    np.testing.assert_allclose(ticks, batch, rtol=1e-9, atol=1e-15)
+
+
+def test_online_command_solves_for_the_delayed_command():
+    """With a delay term the model is affine in q_des: command() returns q_des with q_des - q = model."""
+    m = model_with("delay")
+    on, check = m.online(1e-3), m.online(1e-3)
+    q_des = []
+    for k in range(50):
+        q, tau, dq = 0.1 + 0.001 * k, 10.0, 0.5
+        qd = on.command(q, tau, dq, t=k * 1e-3)
+        q_des.append(qd)
+        assert qd - q == pytest.approx(check.step(tau, dq, q=q, q_des=qd, t=k * 1e-3), abs=1e-12)
+    with pytest.raises(IdentificationError, match="missing signal"):
+        OnlineModel(m, 1e-3).step(1.0, 0.1)
+
+
+def test_fitted_model_round_trips_through_the_motor_parameter_file(tmp_path):
+    """add -> save: the TOML file keeps every term and shape; the loaded model predicts the same."""
+    ds = load_dataset(synthetic_table(lambda t, q, dq, tau: 2e-4 * np.sin(2 * np.pi * q / 0.08), seconds=6.0))
+    lad = add_effects(ds, ModelSpec(("k_tau", "k_v"), (Term("coulomb", {"v_eps": 0.0}),)), effects=["cogging"],
+                      diagnose_final=False)
+    path = save_model(lad, tmp_path / "motors.toml", "RLEG_JOINT3", provenance="test")
+    m = MotorParameters.load_toml(path)["RLEG_JOINT3"]
+    assert m.k_c == pytest.approx(lad.final.coefficients["coulomb"]) and set(m.extra) == {"cogging"}
+    assert set(m.extra["cogging"].shape) == {"period", "phase"} and m.metrics.n_samples == ds.n
+    s = ds.signals
+    np.testing.assert_allclose(m.predict(s["tau"], s["dq"], q=s["q"]), lad.final.predict(s), rtol=1e-9, atol=1e-12)
+    save_model(lad, path, "RLEG_JOINT2", provenance="test")  # other joints of the file are kept
+    assert set(MotorParameters.load_toml(path)) == {"RLEG_JOINT3", "RLEG_JOINT2"}
+
+
+def test_fixed_point_model_reproduces_itself():
+    """A model with terms reading u (dead zone, direction gain) predicts from its own coefficients."""
+    ds = load_dataset(synthetic_table(seconds=4.0))
+    spec = ModelSpec(("k_tau", "k_v"), (Term("coulomb", {"v_eps": 0.005}), Term("deadzone", SHAPES["deadzone"]),
+                                        Term("direction_gain", SHAPES["direction_gain"])))
+    m = fit_spec(ds.signals, ds.target, spec, __import__("servotau.identification", fromlist=["Loss"]).Loss())
+    again = FittedModel.from_motor_model(m.to_motor_model("test"))
+    np.testing.assert_allclose(again.predict(ds.signals), m.predict(ds.signals), rtol=1e-12, atol=1e-15)
+
+
+def test_registering_bad_effects_is_refused():
+    """Names are identifiers, not reserved; grids are numbers; the registry names unknown effects."""
+    with pytest.raises(IdentificationError, match="expected an identifier"):
+        register_effect("bad name", lambda s: s["tau"])
+    with pytest.raises(IdentificationError, match="other than"):
+        register_effect("k_tau", lambda s: s["tau"])
+    with pytest.raises(IdentificationError, match="grid entry"):
+        Effect("g", lambda s, a: s["tau"], grid=[{"a": "x"}])
+    with pytest.raises(IdentificationError, match="unknown effect 'nope': expected one of"):
+        get_effect("nope")
