@@ -213,6 +213,9 @@ class MotorParameters(Mapping[str, MotorModel]):
             raise IdentificationError(f"joint '{joint}' has no motor model: expected one of {list(self.models)}")
         return self.models[joint]
 
+    def __contains__(self, joint: object) -> bool:
+        return joint in self.models  # Mapping's default would turn the clear error above into a crash
+
     def __iter__(self) -> Iterator[str]:
         return iter(self.models)
 

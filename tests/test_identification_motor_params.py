@@ -124,3 +124,17 @@ def test_constructor_validates():
         FitMetrics(1e-4, 2, 10)
     with pytest.raises(IdentificationError, match=r"joint 'J9' has no motor model"):
         params()["J9"]
+
+
+def test_membership_of_an_unknown_joint_is_false_and_lookup_names_it():
+    """`joint in params` answers False for an unknown joint; params[joint] raises naming the known joints."""
+    import pytest as _pytest
+
+    from servotau.config import CONFIG_DIR
+    from servotau.errors import IdentificationError
+    from servotau.identification import MotorParameters
+
+    params = MotorParameters.load_toml(CONFIG_DIR / "motors" / "hrp2_sim_identified.toml")
+    assert "RLEG_JOINT3" in params and "LARM_JOINT0" not in params
+    with _pytest.raises(IdentificationError, match="RLEG_JOINT0"):
+        params["LARM_JOINT0"]
