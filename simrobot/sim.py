@@ -89,6 +89,7 @@ class SimRobot:
         params = load_servo_params(config.servo_path, self.joint_names, armature, config.effects)
         self.servo = Servo(params, self.period)
         self._flex = np.flatnonzero(params.flexible)
+        self._rigid = ~params.flexible  # joints whose damping MuJoCo integrates implicitly
         self.substeps = FLEX_SUBSTEPS if self._flex.size else 1
         if self.substeps > 1:
             m.opt.timestep = self.period / self.substeps
@@ -145,25 +146,17 @@ class SimRobot:
             raise ConfigError(f"q_des: expected {len(self.joint_names)} finite angles [rad], got {q_des!r}")
         m, d, sv = self.model, self.data, self.servo
         q_cmd = sv.delayed_command(q_des)
-        q_link = d.qpos[self._qadr]
-        dq_link = d.qvel[self._dadr]
-        q_m, dq_m = q_link.copy(), dq_link.copy()
-        q_m[self._flex], dq_m[self._flex] = self._theta[self._flex], self._omega[self._flex]
-        tau_motor = sv.motor_torque(q_cmd, q_m, dq_m)
         self._apply_operator(self.time)
-        rigid = np.ones(len(self.joint_names), dtype=bool)
-        rigid[self._flex] = False
-        for _ in range(self.substeps):
-            q_link = d.qpos[self._qadr]
-            dq_link = d.qvel[self._dadr]
-            q_m, dq_m = q_link.copy(), dq_link.copy()
-            q_m[self._flex], dq_m[self._flex] = self._theta[self._flex], self._omega[self._flex]
+        for i in range(self.substeps):
+            q_link, dq_link, q_m, dq_m = self._joint_state()
+            if i == 0:  # the servo runs at the control rate: its torque is held over the sub-steps
+                tau_motor = sv.motor_torque(q_cmd, q_m, dq_m)
             tau = tau_motor - sv.friction(q_m, dq_m)
             if self._flex.size:
                 tau = self._flex_step(tau, q_link, dq_link)
             # The velocity-dependent part of the servo and friction is integrated implicitly:
             # MuJoCo applies -D dq_next as joint damping, so D dq is added back here.
-            damp = sv.damping(dq_m) * rigid
+            damp = sv.damping(dq_m) * self._rigid
             m.dof_damping[self._dadr] = damp
             d.qfrc_applied[self._dadr] = tau + damp * dq_link
             # New torque: recompute accelerations only, integrate, then evaluate the new state
@@ -201,6 +194,14 @@ class SimRobot:
         return SimRobot(replace(self.config, seed=seed))
 
     # -- internals -----------------------------------------------------------------------------
+    def _joint_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Link-side angle and velocity (views), and the motor-side ones (copies) that the servo and
+        the encoders see: equal for rigid joints, the rotor state for elastic ones."""
+        q_link, dq_link = self.data.qpos[self._qadr], self.data.qvel[self._dadr]
+        q_m, dq_m = q_link.copy(), dq_link.copy()
+        q_m[self._flex], dq_m[self._flex] = self._theta[self._flex], self._omega[self._flex]
+        return q_link, dq_link, q_m, dq_m
+
     def _flex_step(self, tau_gear_in: np.ndarray, q_link: np.ndarray, dq_link: np.ndarray) -> np.ndarray:
         """Advance the motor side of elastic joints by one sub-step; return link-side torques."""
         p, f, h = self.servo.p, self._flex, self.model.opt.timestep
@@ -249,8 +250,7 @@ class SimRobot:
 
     def _measure(self) -> SensorFrame:
         sd = self.data.sensordata
-        q_enc = self.data.qpos[self._qadr].copy()
-        q_enc[self._flex] = self._theta[self._flex]  # the encoders sit on the motor side
+        q_enc = self._joint_state()[2]  # the encoders sit on the motor side
         return self.sensors.measure(
             self.time, self.seq, q_enc, sd[self._gyro_adr : self._gyro_adr + 3].copy(),
             sd[self._acc_adr : self._acc_adr + 3].copy(), self._true_wrenches(),
