@@ -81,9 +81,6 @@ class RerunStream:
         self._robot_dt = 1.0 / robot_hz
         if rec is None:
             return
-        self._queue: queue.Queue = queue.Queue(maxsize=8)
-        self._worker = threading.Thread(target=self._send_loop, name="rerun-flush", daemon=True)
-        self._worker.start()
         rec.send_blueprint(_blueprint(plot_joints or self.joint_names[:6]))
         self._model = mujoco.MjModel.from_xml_path(model_path)
         self._data = mujoco.MjData(self._model)
@@ -98,6 +95,9 @@ class RerunStream:
         self._caps = np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_CAPSULE)
         rec.log("robot/floor", rr.Boxes3D(centers=[[0, 0, -0.005]], half_sizes=[[1.0, 1.0, 0.005]],
                                           colors=[[200, 200, 200, 80]]), static=True)
+        self._queue: queue.Queue = queue.Queue(maxsize=8)
+        self._worker = threading.Thread(target=self._send_loop, name="rerun-flush", daemon=True)
+        self._worker.start()
 
     def add(self, time: float, **signals: np.ndarray) -> None:
         """Buffer one tick of signals at sim time ``time`` [s]. Per-joint arrays (length = number of
