@@ -13,7 +13,9 @@ truth: a pure controller).
 - ``lockstep_rtf``: lock-step, simulated seconds per wall second (target >= 2).
 - ``rtt_p50_us`` / ``rtt_p99_us``: lock-step, frame published -> its command received, robot side.
 - ``realtime_late_fraction``: real-time mode (1 kHz), fraction of ticks starting more than one
-  period late, over ``--duration`` seconds.
+  period late, over ``--duration`` seconds; ``realtime_late_fraction_fifo50``: the same with the
+  robot's ticking thread under SCHED_FIFO priority 50 (``realtime_priority``; as a real robot's
+  control loop runs), when the process may use it.
 - ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
 
 Wall-clock figures depend on the machine's load: ``cpu_count`` and ``loadavg_1min`` are reported.
@@ -24,8 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -42,41 +42,26 @@ sys.path.insert(0, str(TESTS))
 
 from servotau.hal import ZenohBackend  # noqa: E402
 from servotau.hal.protocol import decode_frame, encode_frame  # noqa: E402
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from servotau.processes import free_port, stop_process, wait_ready  # noqa: E402
 
 
 @contextmanager
-def _server(robot: str, scenario: str | None, clock: str):
-    port = _free_port()
+def _server(robot: str, scenario: str | None, clock: str, priority: int = 0):
+    port = free_port()
     with tempfile.TemporaryDirectory() as tmp:
         ready = Path(tmp) / "ready"
         args = [sys.executable, "-m", "servotau.hal", "--robot", robot, "--listen", f"tcp/127.0.0.1:{port}",
-                "--clock", clock, "--ready-file", str(ready)]
+                "--clock", clock, "--ready-file", str(ready), "--realtime-priority", str(priority)]
         if scenario:
             args += ["--scenario", scenario]
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
         p = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
-            deadline = time.monotonic() + 30
-            while not ready.exists():
-                if p.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError(f"robot server did not start ({' '.join(args)})")
-                time.sleep(0.01)
+            wait_ready(p, ready, 30.0, f"robot server ({' '.join(args)})")
             with ZenohBackend(_robot_name(robot, scenario), connect=[f"tcp/127.0.0.1:{port}"], truth=False) as backend:
                 yield backend
         finally:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+            stop_process(p)
 
 
 def _robot_name(robot: str, scenario: str | None) -> str:
@@ -111,15 +96,16 @@ def bench_lockstep(robot: str, scenario: str | None, ticks: int) -> dict:
             "rtt_p50_us": st["rtt_p50_us"], "rtt_p99_us": st["rtt_p99_us"]}
 
 
-def bench_realtime(robot: str, scenario: str | None, duration: float) -> dict:
-    with _server(robot, scenario, "realtime") as b:
+def bench_realtime(robot: str, scenario: str | None, duration: float, priority: int = 0) -> dict:
+    with _server(robot, scenario, "realtime", priority) as b:
         st0 = b.status()
         _control(b, seconds=duration)
         st = b.status()
     ticks = st["ticks"] - st0["ticks"]
     late = st["late_ticks"] - st0["late_ticks"]
-    return {"realtime_late_fraction": late / max(ticks, 1), "realtime_ticks": ticks,
-            "realtime_holds": st["holds"]}
+    sfx = f"_fifo{priority}" if priority else ""
+    return {f"realtime_late_fraction{sfx}": late / max(ticks, 1), f"realtime_ticks{sfx}": ticks,
+            f"realtime_holds{sfx}": st["holds"]}
 
 
 def bench_codec() -> dict:
@@ -140,9 +126,13 @@ def main() -> int:
     ap.add_argument("--ticks", type=int, default=5000, help="lock-step ticks (default 5000)")
     ap.add_argument("--robot", default="fake_robot:FakeRobot", help="robot factory 'module:callable'")
     ap.add_argument("--scenario", help="config path passed to the robot factory")
+    ap.add_argument("--fifo", type=int, default=50,
+                    help="also run the real-time part with the robot's ticking thread under SCHED_FIFO at this "
+                         "priority (0: skip; without the permission the server warns and runs normally)")
     args = ap.parse_args()
     out = {**bench_codec(), **bench_lockstep(args.robot, args.scenario, args.ticks),
            **bench_realtime(args.robot, args.scenario, args.duration),
+           **(bench_realtime(args.robot, args.scenario, args.duration, args.fifo) if args.fifo else {}),
            "robot": args.robot, "cpu_count": os.cpu_count(), "loadavg_1min": os.getloadavg()[0]}
     out = {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
     print(json.dumps(out) if args.json else json.dumps(out, indent=2))

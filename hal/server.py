@@ -20,6 +20,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import signal
 import sys
 import threading
@@ -61,10 +62,14 @@ class ServerConfig:
     log: str | None = None  # Parquet log of what was served (frames, applied q_des, truth)
     max_ticks: int | None = None  # stop after this many steps
     publish_truth: bool = True
+    realtime_priority: int = 0  # realtime/robot clocks: SCHED_FIFO priority of the ticking thread (0: normal)
 
     def __post_init__(self):
         if self.clock not in CLOCKS:
             raise HalError(f"server clock {self.clock!r}: expected one of {list(CLOCKS)}")
+        if not 0 <= self.realtime_priority <= 99:
+            raise HalError(f"server realtime_priority {self.realtime_priority}: expected 0 (normal scheduling) "
+                           "or a SCHED_FIFO priority 1..99")
 
     @classmethod
     def from_section(cls, s: Section, safety: SafetyConfig | None = None) -> ServerConfig:
@@ -73,7 +78,7 @@ class ServerConfig:
         from .factory import _str_list
 
         s.check_keys(["robot", "listen", "connect", "mode", "clock", "republish_interval", "log", "max_ticks",
-                      "publish_truth"])
+                      "publish_truth", "realtime_priority"])
         connect = _str_list(s, "connect", [])
         return cls(
             robot=s.str("robot") if "robot" in s else None,
@@ -86,6 +91,7 @@ class ServerConfig:
             log=s.str("log") if "log" in s else None,
             max_ticks=s.int("max_ticks", min=1) if "max_ticks" in s else None,
             publish_truth=s.bool("publish_truth", True),
+            realtime_priority=s.int("realtime_priority", 0, min=0, max=99),
         )
 
 
@@ -325,6 +331,8 @@ class RobotServer:
 
     def _run_realtime(self) -> None:
         period, paced = self.info.period, self.config.clock == "realtime"
+        if self.config.realtime_priority:
+            _set_fifo_priority(self.config.realtime_priority)
         next_t = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
@@ -350,6 +358,18 @@ class RobotServer:
                 return
             if rem > 3e-4:
                 time.sleep(rem - 2e-4)  # the OS wakes up late by ~0.1 ms: spin the rest
+
+
+def _set_fifo_priority(priority: int) -> None:
+    """Run the calling thread under SCHED_FIFO (Linux; needs root or CAP_SYS_NICE): a real-time tick
+    is then not delayed by ordinary processes. Without the permission: a warning, normal scheduling."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError) as exc:
+        logger.warning("realtime_priority %d: SCHED_FIFO refused (%s); ticking with normal scheduling "
+                       "(run as root or grant CAP_SYS_NICE)", priority, exc)
+    else:
+        logger.info("ticking thread under SCHED_FIFO, priority %d", priority)
 
 
 def serve(robot: ServedRobot, config: ServerConfig | None = None,
@@ -383,6 +403,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--log", help="Parquet log of what was served")
     p.add_argument("--max-ticks", type=int)
     p.add_argument("--no-truth", action="store_true", help="do not publish the ground truth")
+    p.add_argument("--realtime-priority", type=int, default=0,
+                   help="realtime/robot clocks: SCHED_FIFO priority 1..99 of the ticking thread (0: normal)")
     p.add_argument("--hold-after", type=float, default=SafetyConfig.hold_after, help="[s]")
     p.add_argument("--servo-off-after", type=float, default=SafetyConfig.servo_off_after, help="[s]")
     p.add_argument("--lockstep-hold-after", type=float, help="[s] lock-step watchdog (default: --hold-after)")
@@ -399,7 +421,7 @@ def main(argv: list[str] | None = None) -> int:
                                            lockstep_hold_after=a.lockstep_hold_after or a.hold_after,
                                            lockstep_servo_off_after=a.lockstep_servo_off_after or a.servo_off_after),
                        log=a.log, max_ticks=a.max_ticks,
-                       publish_truth=not a.no_truth)
+                       publish_truth=not a.no_truth, realtime_priority=a.realtime_priority)
     ready = (lambda: Path(a.ready_file).touch()) if a.ready_file else None
     server = serve(robot, cfg, ready)
     print(json.dumps(server.status()), flush=True)

@@ -8,14 +8,11 @@ robot process and prints a summary. Exits by itself.
 from __future__ import annotations
 
 import os
-import signal
-import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
-from servotau.errors import HalError
+from servotau.processes import free_port, stop_process, wait_ready
 
 
 def register(sub) -> None:
@@ -25,12 +22,6 @@ def register(sub) -> None:
     p.add_argument("--duration", type=float, default=3.0, help="swing duration [s]")
     p.add_argument("--port", type=int, help="loopback port of the robot (default: a free one)")
     p.set_defaults(func=main)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def main(args) -> int:
@@ -43,24 +34,13 @@ def main(args) -> int:
     print(f"[demo] starting the robot process: servotau sim --port {port}", flush=True)
     sim = subprocess.Popen([*cli, "sim", "--port", str(port), "--ready-file", str(ready)])
     try:
-        deadline = time.monotonic() + 60.0
-        while not ready.exists():
-            if sim.poll() is not None:
-                raise HalError(f"the robot process exited with code {sim.returncode} before serving")
-            if time.monotonic() > deadline:
-                raise HalError("the robot process did not start serving within 60 s")
-            time.sleep(0.05)
+        wait_ready(sim, ready, 60.0)
         print("[demo] starting the controller process", flush=True)
         rrd, log = out / "demo.rrd", out / "log.parquet"
         ctl = subprocess.run([*cli, "control", "--port", str(port), "--mode", args.mode, "--duration",
                               str(args.duration), "--rerun", f"save:{rrd}", "--log", str(log)])
     finally:
-        if sim.poll() is None:
-            sim.send_signal(signal.SIGTERM)
-            try:
-                sim.wait(20)
-            except subprocess.TimeoutExpired:
-                sim.kill()
+        stop_process(sim, timeout=20.0)
         ready.unlink(missing_ok=True)
     if ctl.returncode != 0:
         print(f"[demo] the controller exited with code {ctl.returncode}", file=sys.stderr)

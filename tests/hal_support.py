@@ -5,12 +5,15 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
-import time
 from contextlib import contextmanager
 from pathlib import Path
+
+from servotau.errors import HalError
+from servotau.processes import free_port, stop_process, wait_ready
+
+__all__ = ["ENV", "controller", "endpoint", "free_port", "robot_server", "stop_process"]
 
 TESTS = Path(__file__).resolve().parent
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
@@ -26,27 +29,8 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child
         pass
 
 
-def free_port() -> int:
-    """A TCP port free on 127.0.0.1 right now."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{port}"
-
-
-def stop_process(p: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
-    """Stop ``p`` (``sig``, then SIGKILL after ``timeout``) and return its exit code."""
-    if p.poll() is None:
-        p.send_signal(sig)
-        try:
-            p.wait(timeout)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-    return p.returncode
 
 
 @contextmanager
@@ -69,14 +53,10 @@ def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep"
     out = open(tmp / f"server-{port}.log", "w")
     p = subprocess.Popen(args, env=ENV, stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
     try:
-        deadline = time.monotonic() + timeout
-        while not ready.exists():
-            if p.poll() is not None:
-                raise RuntimeError(f"robot server exited with {p.returncode}: "
-                                   f"{(tmp / f'server-{port}.log').read_text()}")
-            if time.monotonic() > deadline:
-                raise TimeoutError("robot server not ready")
-            time.sleep(0.01)
+        try:
+            wait_ready(p, ready, timeout, "robot server")
+        except HalError as exc:
+            raise HalError(f"{exc}: {(tmp / f'server-{port}.log').read_text()}") from None
         yield p
     finally:
         stop_process(p)

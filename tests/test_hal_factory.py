@@ -81,3 +81,12 @@ def test_command_line_overrides(tmp_path):
     with pytest.raises(HalTimeoutError, match="tcp/127.0.0.1:9"):
         open_backend(p, port=9)
     assert overrides_from_args(argparse.Namespace(backend=None, port=7448, mode="x")) == {"port": 7448}
+
+
+def test_realtime_priority_is_validated(tmp_path):
+    """realtime_priority: 0 (normal scheduling) or a SCHED_FIFO priority 1..99, else the field is named."""
+    p = _write(tmp_path, '[hal.server]\nclock = "realtime"\nrealtime_priority = 50\n')
+    assert server_config(p).realtime_priority == 50
+    with pytest.raises(ConfigError, match=r"field 'hal.server.realtime_priority' = 120: expected an integer >= 0 "
+                                          r"<= 99"):
+        server_config(_write(tmp_path, "[hal.server]\nrealtime_priority = 120\n"))
