@@ -19,7 +19,8 @@ shifted by the filter delay) over both trials, divided by the peak |true torque|
 ``rms_err_rel_max`` is the max over the 12 leg joints. Target <= 0.03 with the exact model.
 The true torque contains friction transients (Coulomb reversals of the servo) faster than any
 80-sample filter: ``floor_rel_max`` is the same metric for the ideal filter (the truth itself
-smoothed by the centred 81-sample SG), a lower bound for the paper's estimator.
+smoothed by the centred SG of the encoders' window and order), a lower bound for the estimator.
+``paper_orders_*``: the same with the paper's orders (2 for encoders, 1 for IMU and F/T).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from servotau.estimation import (
     estimate_offline,
     frames_to_arrays,
 )
-from servotau.estimation.config import ModelPerturbation, PredictionSettings
+from servotau.estimation.config import FilterSettings, ModelPerturbation, PredictionSettings
 from servotau.simrobot.scenario import OperatorPush
 from servotau.simrobot.sim import SimConfig, SimRobot
 
@@ -179,12 +180,14 @@ def relative(results: list[dict], key: str = "err") -> np.ndarray:
     return np.sqrt(np.mean(err**2, axis=0)) / np.max(np.abs(truth), axis=0)
 
 
-def floor(recs: list[Recording], window: int = 81) -> np.ndarray:
-    """The metric for the truth smoothed by a centred SG (order 2): what an ideal filter would reach."""
+def floor(recs: list[Recording], window: int, order: int) -> np.ndarray:
+    """The metric for the truth smoothed by a centred SG (``window`` made odd, ``order``): what an ideal
+    filter of that width would reach."""
+    window += 1 - window % 2
     errs, truths = [], []
     for rec in recs:
         keep = rec.time >= rec.start
-        smooth = savgol_filter(rec.tau, window, 2, axis=0)
+        smooth = savgol_filter(rec.tau, window, order, axis=0)
         errs.append((smooth - rec.tau)[keep][window:-window])
         truths.append(rec.tau[keep][window:-window])
     err, truth = np.concatenate(errs), np.concatenate(truths)
@@ -231,7 +234,10 @@ def bench() -> dict:
     rel_pert = relative([run(r, perturbed) for r in recs])
     low = calibrated(EstimatorConfig.from_toml(variant="low_delay"), still_h, still_s, info)
     rel_low = relative([run(r, low) for r in recs])
-    flo = floor(recs)
+    flo = floor(recs, base.encoders.window, base.encoders.order)
+    paper = calibrated(replace(EstimatorConfig.from_toml(), encoders=FilterSettings(80, 2), imu=FilterSettings(80, 1),
+                               ft=FilterSettings(80, 1)), still_h, still_s, info)
+    rel_paper = relative([run(r, paper) for r in recs])
     shorter = {}
     for w in (20, 30, 40):
         cfg = calibrated(EstimatorConfig.from_toml().with_window(w), still_h, still_s, info)
@@ -245,6 +251,9 @@ def bench() -> dict:
         "rms_err_nm_per_joint": {names[j]: round(float(np.sqrt(np.mean(np.concatenate([r["err"][:, j] for r in res])
                                                                         ** 2))), 3) for j in range(12)},
         "floor_rel_max": round(float(np.max(flo[LEG])), 4),
+        "encoders_window_order": [base.encoders.window, base.encoders.order],
+        "paper_orders_rms_err_rel_max": round(float(np.max(rel_paper[LEG])), 4),
+        "paper_orders_floor_rel_max": round(float(np.max(floor(recs, 80, 2)[LEG])), 4),
         "target_rms_err_rel_max": 0.03,
         "delay_ms": round(res[0]["delay"] * 1e3, 2),
         **timing,

@@ -203,8 +203,9 @@ class EstimatorConfig:
 
     # -- TOML ----------------------------------------------------------------------------------
     @classmethod
-    def from_toml(cls, path: str | Path = DEFAULT_PATH, variant: str = "paper") -> EstimatorConfig:
-        """Read ``path`` (see config/estimation.toml); ``variant="low_delay"`` applies its [low_delay] table."""
+    def from_toml(cls, path: str | Path = DEFAULT_PATH, variant: str = "centred") -> EstimatorConfig:
+        """Read ``path`` (see config/estimation.toml): ``variant="centred"`` as written (outputs delayed by
+        half a window, as in the paper); ``"low_delay"`` applies its [low_delay] table."""
         root = load_toml(path)
         root.check_keys(["eval_at", "align", "angular_acceleration", "imu_frame", "unknown_wrench_link",
                          "armature", "filters", "ft_frames", "calibration", "model", "prediction", "low_delay"])
@@ -262,10 +263,10 @@ class EstimatorConfig:
                 velocity_window=pred.int("velocity_window", 20, min=4),
             ),
         )
-        if variant == "paper":
+        if variant == "centred":
             return config
         if variant != "low_delay":
-            raise EstimationError(f"variant={variant!r}: expected 'paper' or 'low_delay'")
+            raise EstimationError(f"variant={variant!r}: expected 'centred' or 'low_delay'")
         low = root.section("low_delay", {})
         low.check_keys(["window", "encoders_order", "imu_order", "ft_order"])
         return config.low_delay(

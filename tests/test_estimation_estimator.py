@@ -253,7 +253,7 @@ def test_unknown_joint_name_in_robot_info_raises(standing):
         TorqueEstimator(bad, EstimatorConfig())
 
 
-@pytest.mark.parametrize("variant", ["paper", "low_delay"])
+@pytest.mark.parametrize("variant", ["centred", "low_delay"])
 def test_derivatives_of_a_polynomial_through_the_estimator_are_exact(standing, variant):
     """Encoders on a polynomial of the filter's order give exact q, dq, ddq at the estimate's time stamp."""
     robot, frames, _, _ = standing
