@@ -13,9 +13,9 @@ truth: a pure controller).
 - ``lockstep_rtf``: lock-step, simulated seconds per wall second (target >= 2).
 - ``rtt_p50_us`` / ``rtt_p99_us``: lock-step, frame published -> its command received, robot side.
 - ``realtime_late_fraction``: real-time mode (1 kHz), fraction of ticks starting more than one
-  period late, over ``--duration`` seconds; ``realtime_late_fraction_fifo50``: the same with the
-  robot's ticking thread under SCHED_FIFO priority 50 (``realtime_priority``; as a real robot's
-  control loop runs), when the process may use it.
+  period late, over ``--duration`` seconds.
+- ``*_fifo50``: the same figures with both processes under SCHED_FIFO priority 50
+  (``realtime_priority``, hal/realtime.py; as a robot's control loop runs), if the user may.
 - ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
 
 Wall-clock figures depend on the machine's load: ``cpu_count`` and ``loadavg_1min`` are reported.
@@ -58,7 +58,8 @@ def _server(robot: str, scenario: str | None, clock: str, priority: int = 0):
         p = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             wait_ready(p, ready, 30.0, f"robot server ({' '.join(args)})")
-            with ZenohBackend(_robot_name(robot, scenario), connect=[f"tcp/127.0.0.1:{port}"], truth=False) as backend:
+            with ZenohBackend(_robot_name(robot, scenario), connect=[f"tcp/127.0.0.1:{port}"], truth=False,
+                              realtime_priority=priority) as backend:
                 yield backend
         finally:
             stop_process(p)
@@ -87,13 +88,14 @@ def _control(backend: ZenohBackend, seconds: float | None = None, ticks: int | N
     return k, time.perf_counter() - t0
 
 
-def bench_lockstep(robot: str, scenario: str | None, ticks: int) -> dict:
-    with _server(robot, scenario, "lockstep") as b:
+def bench_lockstep(robot: str, scenario: str | None, ticks: int, priority: int = 0) -> dict:
+    with _server(robot, scenario, "lockstep", priority) as b:
         _control(b, ticks=200)  # warm up
         n, wall = _control(b, ticks=ticks)
         st = b.status()
-    return {"lockstep_rtf": n * b.info.period / wall, "lockstep_tick_us": wall / n * 1e6,
-            "rtt_p50_us": st["rtt_p50_us"], "rtt_p99_us": st["rtt_p99_us"]}
+    sfx = f"_fifo{priority}" if priority else ""
+    return {f"lockstep_rtf{sfx}": n * b.info.period / wall, f"lockstep_tick_us{sfx}": wall / n * 1e6,
+            f"rtt_p50_us{sfx}": st["rtt_p50_us"], f"rtt_p99_us{sfx}": st["rtt_p99_us"]}
 
 
 def bench_realtime(robot: str, scenario: str | None, duration: float, priority: int = 0) -> dict:
@@ -127,11 +129,12 @@ def main() -> int:
     ap.add_argument("--robot", default="fake_robot:FakeRobot", help="robot factory 'module:callable'")
     ap.add_argument("--scenario", help="config path passed to the robot factory")
     ap.add_argument("--fifo", type=int, default=50,
-                    help="also run the real-time part with the robot's ticking thread under SCHED_FIFO at this "
-                         "priority (0: skip; without the permission the server warns and runs normally)")
+                    help="also run both parts with both processes under SCHED_FIFO at this priority (0: skip; "
+                         "without the permission they warn and run with ordinary scheduling)")
     args = ap.parse_args()
     out = {**bench_codec(), **bench_lockstep(args.robot, args.scenario, args.ticks),
            **bench_realtime(args.robot, args.scenario, args.duration),
+           **(bench_lockstep(args.robot, args.scenario, args.ticks, args.fifo) if args.fifo else {}),
            **(bench_realtime(args.robot, args.scenario, args.duration, args.fifo) if args.fifo else {}),
            "robot": args.robot, "cpu_count": os.cpu_count(), "loadavg_1min": os.getloadavg()[0]}
     out = {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}

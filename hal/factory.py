@@ -106,7 +106,8 @@ def open_backend(config: Section | str | Path, *, backend: str | None = None, po
         from .zenoh_backend import ZenohBackend
 
         z = s.section("zenoh", {})
-        z.check_keys(["robot", "connect", "listen", "mode", "connect_timeout", "frame_timeout", "truth"])
+        z.check_keys(["robot", "connect", "listen", "mode", "connect_timeout", "frame_timeout", "truth",
+                      "realtime_priority"])
         if port is not None:
             z = _override(z, "connect", [f"tcp/127.0.0.1:{port}"], "--port")
         return ZenohBackend(
@@ -117,6 +118,7 @@ def open_backend(config: Section | str | Path, *, backend: str | None = None, po
             connect_timeout=z.float("connect_timeout", 10.0, min=0, strict_min=True, unit="s"),
             frame_timeout=z.float("frame_timeout", 0.1, min=0, strict_min=True, unit="s"),
             truth=z.bool("truth", True),
+            realtime_priority=z.int("realtime_priority", 0, min=0, max=99),
         )
     if name == "inprocess":
         from .inprocess import InProcessBackend

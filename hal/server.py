@@ -20,7 +20,6 @@ import argparse
 import json
 import logging
 import math
-import os
 import signal
 import sys
 import threading
@@ -38,6 +37,7 @@ from .errors import HalError, MalformedMessage, ProtocolVersionMismatch
 from .firmware import Firmware, FirmwareState, SafetyConfig
 from .log import LogWriter
 from .protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
+from .realtime import check_priority, set_realtime_priority
 from .served import ServedRobot
 from .zenoh_session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 
@@ -62,14 +62,12 @@ class ServerConfig:
     log: str | None = None  # Parquet log of what was served (frames, applied q_des, truth)
     max_ticks: int | None = None  # stop after this many steps
     publish_truth: bool = True
-    realtime_priority: int = 0  # realtime/robot clocks: SCHED_FIFO priority of the ticking thread (0: normal)
+    realtime_priority: int = 0  # SCHED_FIFO priority of the process (hal/realtime.py); 0: ordinary scheduling
 
     def __post_init__(self):
         if self.clock not in CLOCKS:
             raise HalError(f"server clock {self.clock!r}: expected one of {list(CLOCKS)}")
-        if not 0 <= self.realtime_priority <= 99:
-            raise HalError(f"server realtime_priority {self.realtime_priority}: expected 0 (normal scheduling) "
-                           "or a SCHED_FIFO priority 1..99")
+        check_priority(self.realtime_priority, "server realtime_priority")
 
     @classmethod
     def from_section(cls, s: Section, safety: SafetyConfig | None = None) -> ServerConfig:
@@ -248,6 +246,7 @@ class RobotServer:
     # -- internals ---------------------------------------------------------------------------------
     def _open(self) -> None:
         cfg, k = self.config, self.keys
+        set_realtime_priority(cfg.realtime_priority)  # before the session: its threads inherit it
         s = self._session = Session(zenoh_config(listen=cfg.listen, connect=cfg.connect, mode=cfg.mode))
         z = s.z
         cc = zenoh.CongestionControl.BLOCK if self.lockstep else zenoh.CongestionControl.DROP
@@ -331,8 +330,6 @@ class RobotServer:
 
     def _run_realtime(self) -> None:
         period, paced = self.info.period, self.config.clock == "realtime"
-        if self.config.realtime_priority:
-            _set_fifo_priority(self.config.realtime_priority)
         next_t = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
@@ -358,18 +355,6 @@ class RobotServer:
                 return
             if rem > 3e-4:
                 time.sleep(rem - 2e-4)  # the OS wakes up late by ~0.1 ms: spin the rest
-
-
-def _set_fifo_priority(priority: int) -> None:
-    """Run the calling thread under SCHED_FIFO (Linux; needs root or CAP_SYS_NICE): a real-time tick
-    is then not delayed by ordinary processes. Without the permission: a warning, normal scheduling."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (AttributeError, OSError) as exc:
-        logger.warning("realtime_priority %d: SCHED_FIFO refused (%s); ticking with normal scheduling "
-                       "(run as root or grant CAP_SYS_NICE)", priority, exc)
-    else:
-        logger.info("ticking thread under SCHED_FIFO, priority %d", priority)
 
 
 def serve(robot: ServedRobot, config: ServerConfig | None = None,
@@ -404,7 +389,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-ticks", type=int)
     p.add_argument("--no-truth", action="store_true", help="do not publish the ground truth")
     p.add_argument("--realtime-priority", type=int, default=0,
-                   help="realtime/robot clocks: SCHED_FIFO priority 1..99 of the ticking thread (0: normal)")
+                   help="SCHED_FIFO priority 1..99 of the process (0: ordinary scheduling; needs root or "
+                        "CAP_SYS_NICE)")
     p.add_argument("--hold-after", type=float, default=SafetyConfig.hold_after, help="[s]")
     p.add_argument("--servo-off-after", type=float, default=SafetyConfig.servo_off_after, help="[s]")
     p.add_argument("--lockstep-hold-after", type=float, help="[s] lock-step watchdog (default: --hold-after)")

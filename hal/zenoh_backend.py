@@ -27,6 +27,7 @@ from .protocol import (
     info_from_json,
     keys,
 )
+from .realtime import check_priority, set_realtime_priority
 from .types import SensorFrame
 from .zenoh_session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 
@@ -55,6 +56,8 @@ class ZenohBackend(Backend):
         zenoh_extra: extra zenoh config entries, path -> JSON value.
         truth: subscribe to the ground truth (simulation; False saves the robot and this process
             encoding, sending and decoding it every tick).
+        realtime_priority: SCHED_FIFO priority 1..99 of the calling thread (the control loop) and of
+            zenoh's threads (:mod:`servotau.hal.realtime`); 0: ordinary scheduling.
     """
 
     def __init__(
@@ -68,7 +71,9 @@ class ZenohBackend(Backend):
         frame_timeout: float = 0.1,
         zenoh_extra: Mapping[str, Any] | None = None,
         truth: bool = True,
+        realtime_priority: int = 0,
     ):
+        check_priority(realtime_priority)
         self.keys = keys(robot)
         self.robot_name = robot
         self.frame_timeout = frame_timeout
@@ -84,6 +89,7 @@ class ZenohBackend(Backend):
         self.frames_received = 0
         self.frames_skipped = 0  # real-time mode: frames never returned because a newer one came
         self._joint_names: tuple[str, ...] | None = None
+        set_realtime_priority(realtime_priority)  # before the session: zenoh's threads inherit it
         self._session = Session(zenoh_config(listen=listen, connect=connect, mode=mode, extra=zenoh_extra))
         try:
             first = self._connect(connect_timeout)

@@ -178,14 +178,3 @@ def test_realtime_clock_runs_on_wall_time(tmp_path, clock):
     assert 0.5 * elapsed < (f.seq - f0.seq) * 1e-3 < 1.2 * elapsed
     assert abs(f.q[0] - (f0.q[0] + 0.05)) < 0.01 and st["clock"] == "realtime" and st["state"] == "RUNNING"
 
-
-def test_realtime_priority_refused_warns_and_keeps_ticking(monkeypatch, caplog):
-    """Without the permission for SCHED_FIFO the server says so and runs with normal scheduling."""
-    from servotau.hal import server
-
-    def refuse(*_):
-        raise PermissionError(1, "Operation not permitted")
-
-    monkeypatch.setattr(server.os, "sched_setscheduler", refuse)
-    server._set_fifo_priority(50)
-    assert "realtime_priority 50: SCHED_FIFO refused" in caplog.text
