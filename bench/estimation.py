@@ -268,8 +268,8 @@ def bench() -> dict:
 
 
 def plot(path: str) -> dict:
-    """Delay [ms] against torque error [N m] for windows 10..120: paper (centred), low-delay (newest sample)
-    and actuator-model prediction estimators.
+    """Delay [ms] against torque error [N m] for windows 10..120: centred (paper; the configured orders),
+    low-delay (newest sample) and actuator-model prediction estimators.
 
     Each point is the lag minimising the RMS of (estimate - truth shifted by the lag) over both trials and
     the leg joints, and that RMS: it contains the noise and the smoothing error (the true torque has fast
@@ -288,7 +288,8 @@ def plot(path: str) -> dict:
     cfg0 = calibrated(EstimatorConfig.from_toml(), still_h, still_s, info)
     motor = fit_motor_model(hanging, cfg0, range(0, 12))
     modelled = [info.joint_index(j) for j in motor.k_tau]
-    names = {"centre": "paper: centred SG", "last": "low delay: SG at the newest sample, order + 1",
+    orders = f"{cfg0.encoders.order}/{cfg0.imu.order}/{cfg0.ft.order}"
+    names = {"centre": f"centred SG (paper), orders {orders}", "last": "low delay: SG at the newest sample",
              "model": f"centred SG + actuator-model prediction ({len(modelled)} joints)"}
     curves = {v: [] for v in names.values()}
     leg = list(range(12))
