@@ -15,14 +15,17 @@ effect                    phi                                                   
 ``deadzone``              ``clip(u / band, -1, 1)``                              tau, dq
 ``direction_gain``        ``s(dq, v_eps) u``                                     tau, dq
 ``load_friction``         ``|tau| s(dq, v_eps)``                                 tau, dq
-``backlash``              ``s(tau, tau_band)``                                   tau
+``backlash``              ``a (1 + gain exp(-(tau / tau_band)^2))``              tau, ddq (+ history if lag)
 ``cogging``               ``sin(2 pi q / period + phase)``                       q
 ``thermal_drift``         ``h dq``, ``h`` = lag(``(u / 1 mrad)^2``, tau_th)      tau, dq history (a lag)
 ``saturation``            ``sign(m) [|m| > u_sat]``, m = u - 0.67 k_v dq         tau, dq
-``elastic``               ``ddq`` (centred SG of q over ``window``)               ddq (the estimator's)
+``elastic``               ``a``                                                  ddq (+ history if lag)
 ``motor_lag``             ``lag(u, time_constant) - u``                          tau, dq history (a lag)
 ``delay``                 ``q_des(t) - q_des(t - delay)``                        q_des history
 ========================  =====================================================  ==========================
+
+``a`` is the acceleration ``ddq`` (centred SG of ``q`` over ``window``, or the estimator's), delayed by
+``lag`` like the torque estimate (see :func:`inertia`).
 """
 
 from __future__ import annotations
@@ -161,8 +164,21 @@ def acceleration(s: Signals, window: float) -> np.ndarray:
     return savgol_centred(s["q"], w, 3, dt, deriv=2)
 
 
-def backlash(s: Signals, window: float, tau_band: float, gain: float) -> np.ndarray:
-    return acceleration(s, window) * (1.0 + gain * np.exp(-((s["tau"] / tau_band) ** 2)))
+def inertia(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
+    """The acceleration of :func:`acceleration`, delayed by ``lag`` [s] like the torque estimate.
+
+    The servo torque is the link torque plus the rotor's inertia torque ``J ddq``; when the torque column
+    is an estimate that lags the encoders (an estimator's delay), only an equally delayed inertia term
+    completes it into the (smooth) servo torque of that earlier instant. ``lag = 0``: no delay.
+    """
+    a = acceleration(s, window)
+    if lag <= 0.0:
+        return a
+    return delayed(a, ticks(lag, s.require_dt("the lag of the inertia term")))
+
+
+def backlash(s: Signals, window: float, tau_band: float, gain: float, lag: float = 0.0) -> np.ndarray:
+    return inertia(s, window, lag) * (1.0 + gain * np.exp(-((s["tau"] / tau_band) ** 2)))
 
 
 def cogging(s: Signals, period: float, phase: float = 0.0) -> np.ndarray:
@@ -197,8 +213,8 @@ def _saturation_grid(s: Signals) -> tuple[dict[str, float], ...]:
     return tuple({"u_sat": float(f"{v:.4g}"), "damping_share": 0.67} for v in levels)
 
 
-def elastic(s: Signals, window: float) -> np.ndarray:
-    return acceleration(s, window)
+def elastic(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
+    return inertia(s, window, lag)
 
 
 def motor_lag(s: Signals, time_constant: float) -> np.ndarray:
@@ -261,6 +277,36 @@ class _MotorLagOnline(_LagOnline):
         self.y = self._next(x["u"])
 
 
+class _InertiaOnline:
+    """``elastic`` and ``backlash`` on-line: the estimator's acceleration, delayed by ``lag`` (a buffer)."""
+
+    def __init__(self, shape: Mapping[str, float], period: float):
+        lag = shape.get("lag", 0.0)
+        self.n = ticks(lag, period) if lag > 0.0 else 0
+        self.tau_band, self.gain = shape.get("tau_band"), shape.get("gain", 0.0)
+        self.buf: list[float] = []
+
+    def _acc(self, x: Mapping[str, float]) -> float:
+        a = _sample_acc(x)
+        if self.n == 0:
+            return a
+        if len(self.buf) < self.n:
+            return self.buf[0] if self.buf else a
+        return self.buf[-self.n]
+
+    def value(self, x: Mapping[str, float]) -> float:
+        a = self._acc(x)
+        if self.tau_band is None:
+            return a
+        return a * (1.0 + self.gain * math.exp(-((x["tau"] / self.tau_band) ** 2)))
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        if self.n:
+            self.buf.append(_sample_acc(x))
+            if len(self.buf) > self.n:
+                del self.buf[0]
+
+
 class _DelayOnline:
     def __init__(self, shape: Mapping[str, float], period: float):
         self.n = ticks(shape["delay"], period)
@@ -282,6 +328,7 @@ class _DelayOnline:
 
 _V_EPS = (0.0, 0.005, 0.01, 0.02, 0.05)  # [rad/s] sign smoothing
 _V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
+_LAGS = (0.0, 0.002, 0.005)  # [s] delay of the inertia term (that of the torque estimate)
 
 BUILTIN = (
     Effect(
@@ -328,13 +375,13 @@ BUILTIN = (
     ),
     Effect(
         "backlash", backlash,
-        tuple({"window": w, "tau_band": b, "gain": g}
-              for w in (0.011, 0.021) for b in (2.0, 5.0, 10.0) for g in (1.0, 3.0)),
+        tuple({"window": w, "tau_band": b, "gain": g, "lag": lag}
+              for w in (0.011, 0.021) for b in (2.0, 5.0, 10.0) for g in (1.0, 3.0) for lag in _LAGS),
         ("q", "tau"),
         "residual follows the motor acceleration, more strongly while the torque is near zero (the rotor crosses "
         "the play unloaded)",
         "dynamics", "compliant gear with play: the rotor inertia acts behind the gear, freely inside the play",
-        _torque_reversal,
+        _torque_reversal, online=_InertiaOnline,
         confusable=("elastic", "deadzone"),
     ),
     Effect(
@@ -356,10 +403,11 @@ BUILTIN = (
         "servo_error", "current limit: past it the servo cannot produce more torque", _has_torque,
     ),
     Effect(
-        "elastic", elastic, tuple({"window": w} for w in (0.011, 0.021, 0.041, 0.081)), ("q",),
+        "elastic", elastic, tuple({"window": w, "lag": lag} for w in (0.011, 0.021, 0.041, 0.081) for lag in _LAGS),
+        ("q",),
         "residual proportional to the acceleration (rotor inertia behind a compliant gear)",
         "dynamics", "elastic gear: the motor inertia acts behind the spring, outside the link torque", _fast,
-        confusable=("backlash", "motor_lag", "delay"),
+        online=_InertiaOnline, confusable=("backlash", "motor_lag", "delay"),
     ),
     Effect(
         "motor_lag", motor_lag, tuple({"time_constant": v} for v in (0.005, 0.01, 0.02, 0.05)),
@@ -404,7 +452,8 @@ EXPERIMENTS = {
     ),
     frozenset(("elastic", "backlash")): (
         "reverse the torque slowly at rest and compare a link-side angle with the motor encoder: backlash jumps by "
-        "the play at zero torque, an elastic gear deflects in proportion to the torque"
+        "the play at zero torque, an elastic gear deflects in proportion to the torque (model the deflection "
+        "q_motor - q_link against the torque: play shows as a 'deadzone' step of half the play)"
     ),
     frozenset(("elastic", "motor_lag")): (
         "a chirp of the command at constant load: the acceleration term grows with the square of the frequency, "
@@ -437,13 +486,9 @@ SCALAR = {
     "deadzone": lambda x, band, damping_share=0.0: min(1.0, max(-1.0, (x["u"] - damping_share * x["u_v"]) / band)),
     "direction_gain": lambda x, v_eps: _ssign(x["dq"], v_eps) * x["u"],
     "load_friction": lambda x, v_eps: abs(x["tau"]) * _ssign(x["dq"], v_eps),
-    "backlash": lambda x, window, tau_band, gain: (
-        _sample_acc(x) * (1.0 + gain * math.exp(-((x["tau"] / tau_band) ** 2)))
-    ),
     "cogging": lambda x, period, phase=0.0: math.sin(2.0 * math.pi * x["q"] / period + phase),
     "saturation": lambda x, u_sat, damping_share=0.67: (
         _ssign(x["u"] - damping_share * x["u_v"], 0.0) * (abs(x["u"] - damping_share * x["u_v"]) > u_sat)
     ),
-    "elastic": lambda x, window: _sample_acc(x),
 }
 """``phi(sample, **shape)`` of the built-in effects without memory, on one sample (a mapping of floats)."""

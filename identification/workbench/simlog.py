@@ -14,7 +14,9 @@ The log carries what a real robot would give, one row per tick as a controller l
 encoder ``q`` it read, the command ``q_des`` it sent, and a torque estimate ``tau`` = the joint torque
 of that period delayed by ``tau_delay`` and with white noise ``tau_noise`` (the estimator). No velocity:
 the workbench computes it by centred Savitzky-Golay differentiation, as on a real log. Ground truth
-rides along in ``true/tau``, ``true/dq`` and ``true/current`` (ignored by the workbench) and the cycle
+rides along in ``true/tau``, ``true/dq``, ``true/current`` and ``true/q`` (the link-side angle: the encoder
+is on the motor side, so they differ by the gear's deflection on an elastic gear or one with play; an
+experiment with a link-side angle sensor reads it), ignored by the workbench unless mapped, and the cycle
 index in ``segment``.
 """
 
@@ -75,7 +77,7 @@ def simulate_log(
 
     Returns:
         Columns ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], ``segment``, ``true/tau``,
-        ``true/dq``, ``true/current``, one row per 1 ms tick.
+        ``true/dq``, ``true/current``, ``true/q`` [rad] (link side), one row per 1 ms tick.
     """
     from servotau.simrobot.scenario import OperatorPush  # the simulator is optional for the workbench
     from servotau.simrobot.sim import SimConfig, SimRobot
@@ -107,7 +109,7 @@ def simulate_log(
                                     frequency=0.5 / (0.2 * T)))
         cycles.append((a1, a2, phase, sgn))
     n = int(round(plan.seconds / dt))
-    out = {k: np.empty(n) for k in ("t", "q", "q_des", "true/tau", "true/dq", "true/current", "segment")}
+    out = {k: np.empty(n) for k in ("t", "q", "q_des", "true/tau", "true/dq", "true/current", "true/q", "segment")}
     q_cmd = q0.copy()
     for k in range(n):
         t = k * dt
@@ -119,7 +121,9 @@ def simulate_log(
         # torque the servo produced during that period.
         out["t"][k] = robot.time
         out["q"][k] = robot.read().q[j]
-        out["true/dq"][k] = robot.ground_truth().dq[j]
+        g = robot.ground_truth()
+        out["true/dq"][k] = g.dq[j]
+        out["true/q"][k] = g.q[j]
         out["q_des"][k] = q_cmd[j]
         robot.step(q_cmd)
         g = robot.ground_truth()
