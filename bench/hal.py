@@ -17,6 +17,9 @@ truth: a pure controller).
 - ``*_fifo50``: the same figures with both processes under SCHED_FIFO priority 50
   (``realtime_priority``, hal/realtime.py; as a robot's control loop runs), if the user may.
 - ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
+- ``baseline_rtt_p50_us`` / ``_p99_us``: a bare Zenoh Python ping-pong with the same sizes and
+  settings (bench/zenoh_pingpong.py), in the same run; ``rtt_*_ratio_to_baseline``: what the HAL
+  adds, as a ratio that a shared machine's load changes less than the absolute figures.
 
 Wall-clock figures depend on the machine's load: ``cpu_count`` and ``loadavg_1min`` are reported.
 """
@@ -110,6 +113,22 @@ def bench_realtime(robot: str, scenario: str | None, duration: float, priority: 
             f"realtime_holds{sfx}": st["holds"]}
 
 
+def bench_baseline(ticks: int) -> dict:
+    """Bare Zenoh ping-pong (bench/zenoh_pingpong.py), the floor under ``rtt_*``, in this run."""
+    port, script = free_port(), str(Path(__file__).with_name("zenoh_pingpong.py"))
+    robot = subprocess.Popen([sys.executable, script, "robot", str(port), str(ticks)], stdout=subprocess.PIPE,
+                             text=True)
+    ctl = subprocess.Popen([sys.executable, script, "controller", str(port), str(ticks)])
+    try:
+        out, _ = robot.communicate(timeout=180)
+        ctl.wait(30)
+    finally:
+        stop_process(robot)
+        stop_process(ctl)
+    r = json.loads(out)
+    return {"baseline_rtt_p50_us": r["rtt_p50_us"], "baseline_rtt_p99_us": r["rtt_p99_us"]}
+
+
 def bench_codec() -> dict:
     from fake_robot import FakeRobot
 
@@ -132,11 +151,13 @@ def main() -> int:
                     help="also run both parts with both processes under SCHED_FIFO at this priority (0: skip; "
                          "without the permission they warn and run with ordinary scheduling)")
     args = ap.parse_args()
-    out = {**bench_codec(), **bench_lockstep(args.robot, args.scenario, args.ticks),
+    out = {**bench_codec(), **bench_baseline(args.ticks), **bench_lockstep(args.robot, args.scenario, args.ticks),
            **bench_realtime(args.robot, args.scenario, args.duration),
            **(bench_lockstep(args.robot, args.scenario, args.ticks, args.fifo) if args.fifo else {}),
            **(bench_realtime(args.robot, args.scenario, args.duration, args.fifo) if args.fifo else {}),
            "robot": args.robot, "cpu_count": os.cpu_count(), "loadavg_1min": os.getloadavg()[0]}
+    out["rtt_p50_ratio_to_baseline"] = out["rtt_p50_us"] / out["baseline_rtt_p50_us"]
+    out["rtt_p99_ratio_to_baseline"] = out["rtt_p99_us"] / out["baseline_rtt_p99_us"]
     out = {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
     print(json.dumps(out) if args.json else json.dumps(out, indent=2))
     return 0
