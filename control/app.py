@@ -87,7 +87,8 @@ def run_session(backend, *, mode: str, duration: float, stream: RerunStream | No
             writer(frame, terms.q_des, estimate, truth)
         if stream is not None:
             signals = {"q": frame.q, "q_des": terms.q_des, "q_ref": ref.q, "dq_err": terms.q_des - frame.q,
-                       "tau_est": estimate.tau, "ff_friction": terms.ff_friction, "ff_torque": terms.ff_torque,
+                       "tau_est": estimate.tau, "ff_friction": terms.ff_friction, "ff_extra": terms.ff_extra,
+                       "ff_torque": terms.ff_torque,
                        "fb_position": terms.fb_position, "fb_velocity": terms.fb_velocity,
                        "fb_acceleration": terms.fb_acceleration, "fb_force": terms.fb_force,
                        "imu/gyro": frame.imu_angular_velocity, "imu/acc": frame.imu_linear_acceleration}

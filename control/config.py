@@ -16,7 +16,7 @@ from types import MappingProxyType
 import numpy as np
 
 from servotau.config import CONFIG_DIR, Section, load_toml, resolve_config_path
-from servotau.errors import ConfigError, ControlError
+from servotau.errors import ConfigError, ControlError, ServotauError
 from servotau.hal.types import FT_SENSOR_NAMES, RobotInfo
 from servotau.identification.motor_params import MotorModel, MotorParameters
 
@@ -224,9 +224,11 @@ class ControlConfig:
             raise root.error("version", version, f"{FORMAT_VERSION}")
         motors_path = root.str("motors")
         try:
-            motors = dict(MotorParameters.load_toml(resolve_config_path(motors_path)).models)
+            motors_file = resolve_config_path(motors_path)
+            motors = dict(MotorParameters.load_toml(motors_file).models)
         except ConfigError as err:
             raise ConfigError(f"{root.file}: field 'motors' = {motors_path!r}: {err}") from err
+        _check_extra_terms(motors, motors_file, info.period)
         names = info.joint_names
 
         torque_joints = root.data.get("torque_joints", [])
@@ -289,6 +291,30 @@ class ControlConfig:
             fade_time=root.float("fade_time", 0.5, min=0.0, unit="s"),
             source=root.file,
         )
+
+
+def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: float) -> None:
+    """Every extra term of the motor file must be one the controller's feedforward can evaluate on-line.
+
+    Raises:
+        ConfigError: Naming the motor file, the field ``joints.<joint>.extra.<term>`` and what was expected.
+    """
+    from servotau.identification.workbench.effects import effect_names
+    from servotau.identification.workbench.online import OnlineModel
+
+    known = effect_names()
+    for joint, m in motors.items():
+        for name, term in m.extra.items():
+            field_ = f"joints.{joint}.extra.{name}"
+            if name not in known:
+                raise ConfigError(f"{file}: field '{field_}': unknown motor-model term '{name}': expected one of "
+                                  f"the model workbench's effects {known}")
+            one = MotorModel(k_tau=m.k_tau, k_v=m.k_v, extra={name: term}, provenance=m.provenance)
+            try:
+                OnlineModel(one, period).predict(0.0, 0.0, q=0.0, q_des=0.0, t=0.0, ddq=0.0)
+            except (ServotauError, KeyError, TypeError, ValueError) as err:
+                raise ConfigError(f"{file}: field '{field_}' (shape {dict(term.shape)}): {err}: expected the "
+                                  f"shape parameters of effect '{name}'") from err
 
 
 def _joint_gains(own: Section, defaults: Section, k_tau: float) -> JointGains:

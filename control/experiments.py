@@ -32,8 +32,11 @@ LEG = tuple(f"RLEG_JOINT{i}" for i in range(6))
 LEG_LABELS = ("hip yaw", "hip roll", "hip pitch", "knee", "ankle pitch", "ankle roll")
 K6_VALUES = (1.0, 0.5, 0.25, 0.1)
 PAPER_COMPONENTS = ("ff_torque", "ff_friction", "fb_position", "fb_velocity", "fb_acceleration", "fb_force")
-OTHER_COMPONENTS = ("fb_torque_residual", "fb_integral", "switch_offset")
+OTHER_COMPONENTS = ("ff_extra", "fb_torque_residual", "fb_integral", "switch_offset")
 
+MOTION_EXTRA = ((0.25, 0.003),)  # (K6, k7 [s]) runs beside the sweep: more velocity feedback than the config's
+PAPER_MODEL = "motors/hrp2_sim_identified.toml"  # the paper's motor model (k_tau, k_v), for comparison
+PAPER_MODEL_K6 = (1.0, 0.25)  # K6 of the runs with PAPER_MODEL beside the sweep
 SETTLE = 0.5  # [s] position mode, holding the start posture; F/T offsets calibrated here
 HOLD = 1.0  # [s] in the experiment's mode before the motion (the mode switch offset fades in 0.5 s)
 TAIL = 0.5  # [s] after the swing, still evaluated
@@ -45,6 +48,16 @@ FORCE_FREQUENCY = 0.5  # [Hz]
 FORCE_DURATION = 6.0  # [s] of sinusoid (3 periods)
 FORCE_K6 = 0.1
 FORCE_KF = 1.0
+FORCE_MAX_DISPLACEMENT = 0.01  # [m] the compatible posture follows the foot up to 1 cm from the start, per axis
+
+POSTURE_TEXT = {
+    "start": "the start posture (it fights the force task: the contact is not rigid, see docs/results.md).",
+    "compatible": "compatible with the force task (paper 5.4), control/trajectory.py ForceCompatiblePosture: the "
+                  "start posture during the first period, which also calibrates the contact compliance C (least "
+                  "squares of the foot's displacement J (q_hat - q0) on the measured f_z change, with intercept and "
+                  "trend), then q0 + J^+ C (f_d - f0): the posture the robot takes when the force is the reference, "
+                  "so the position feedback (K6 = 0.1) no longer cancels part of the commanded force.",
+}
 
 # Paper, Tables 2 and 3 (rad * 1e3 = mrad); the paper has no hip-yaw row.
 PAPER_MEAN = {
@@ -87,8 +100,9 @@ class Run:
         return out
 
 
-def _control_config(info, k6: float | None, force: bool):
-    """config/control.toml with every torque joint at ``k6`` and, if ``force``, the paper's force task."""
+def _control_config(info, k6: float | None, force: bool, k7: float | None = None, motors: str | None = None):
+    """config/control.toml with every torque joint at ``k6`` (and ``k7`` [s] if given), the motor file ``motors``
+    if given and, if ``force``, the paper's force task."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
 
@@ -99,10 +113,25 @@ def _control_config(info, k6: float | None, force: bool):
         for joint in data.get("joints", {}).values():  # no per-joint position gain may override the sweep
             joint.pop("k6", None)
             joint.pop("k_s", None)
+    if k7 is not None:
+        data["defaults"].pop("k_d", None)
+        data["defaults"]["k7"] = k7
+        for joint in data.get("joints", {}).values():
+            joint.pop("k7", None)
+            joint.pop("k_d", None)
+    if motors is not None:
+        data["motors"] = motors
     if force:
         data["force"] = {"sensor": "right_ankle", "frame": "ft_right_ankle", "offset": [0.0, 0.0, -0.02],
                          "axes": ["fx", "fy", "fz"], "k_f": [FORCE_KF] * 3}
     return ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
+
+
+def _motors_file() -> str:
+    """The motor-parameter file of config/control.toml (relative to config/)."""
+    from servotau.config import CONFIG_DIR, load_toml
+
+    return str(load_toml(CONFIG_DIR / "control.toml").data["motors"])
 
 
 def _ft_offsets_hanging(seed: int, est_cfg) -> np.ndarray:
@@ -123,7 +152,8 @@ def _ft_offsets_hanging(seed: int, est_cfg) -> np.ndarray:
 
 def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: float | None = 1.0,
              swing: float | None = SWING, force_profile=None, duration: float | None = None, seed: int = SEED,
-             rerun: str | None = None) -> Run:
+             rerun: str | None = None, posture: str = "compatible", k7: float | None = None,
+             motors: str | None = None) -> Run:
     """One run: settle in position mode, switch to ``mode``, hold ``HOLD`` s, then the motion or force task.
 
     Args:
@@ -137,9 +167,14 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
         duration: Evaluated duration [s] (default: swing + TAIL).
         seed: Simulator seed.
         rerun: ``save:FILE`` etc. to stream the run to Rerun, or None.
+        k7: Velocity gain [s] of the torque joints (None: the config's).
+        motors: Motor-parameter file relative to config/ (None: the config's).
+        posture: With a force task, the joint reference: ``compatible`` follows the measured motion along the
+            task directions (:class:`~servotau.control.trajectory.ForceCompatiblePosture`, paper 5.4), ``start``
+            is the start posture.
     """
     from servotau.control import ControlManager
-    from servotau.control.trajectory import TrajectoryPoint, right_leg_swing
+    from servotau.control.trajectory import ForceCompatiblePosture, TrajectoryPoint, right_leg_swing
     from servotau.estimation import EstimatorConfig, TorqueEstimator, calibrate_ft_offsets
     from servotau.hal.inprocess import InProcessBackend
     from servotau.simrobot.sim import SimConfig, SimRobot
@@ -149,7 +184,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     legs = np.array([info.joint_names.index(j) for j in LEG])
     est_cfg = EstimatorConfig.from_toml(variant="low_delay")
     estimator = TorqueEstimator(info, est_cfg)
-    manager = ControlManager(info, _control_config(info, k6, force_profile is not None))
+    manager = ControlManager(info, _control_config(info, k6, force_profile is not None, k7, motors))
     stream = None
     if rerun:
         from servotau.viewer import RerunStream, open_recording
@@ -160,6 +195,10 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     q_start = frame.q.copy()
     hold = TrajectoryPoint(q_start, np.zeros(info.nq), np.zeros(info.nq))
     traj = right_leg_swing(info.joint_names, q_start, swing) if swing else None
+    if posture not in ("compatible", "start"):
+        raise ValueError(f"posture = {posture!r}: expected 'compatible' or 'start'")
+    compatible = (ForceCompatiblePosture(q_start, legs, 1.0 / FORCE_FREQUENCY, FORCE_MAX_DISPLACEMENT)
+                  if force_profile is not None and posture == "compatible" else None)
     duration = duration if duration is not None else (swing or 0.0) + TAIL
     dt = info.period
     n_settle, n_hold = int(round(SETTLE / dt)), int(round(HOLD / dt))
@@ -178,6 +217,9 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
                 manager.request_mode(mode)
             t = (k - n_settle - n_hold) * dt  # [s] from the start of the motion / force task
             ref = traj.sample(t) if traj is not None and t >= 0 else hold
+            if compatible is not None and t >= 0:  # calibrated on the first period (not evaluated), then used
+                idc = manager.law.inverse_dynamics
+                ref = compatible.update(t, estimate.q, idc.task_jacobian, idc.f_hat[:3], idc.f_d[:3])
             if force_profile is not None and f_meas is not None:
                 if t >= 0 and f0 is None:
                     f0 = f_meas.copy()
@@ -276,6 +318,12 @@ def motion_runs(quick: bool, out: Path, rerun: bool = False) -> dict[str, Run]:
     for k6 in gains:
         name = _label(k6)
         runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, rerun=_rerun_target(out, rerun, f"motion-{name}"))
+    for k6, k7 in (() if quick else MOTION_EXTRA):
+        name = f"{_label(k6)} k7={k7:g}"
+        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, k7=k7)
+    for k6 in (() if quick else PAPER_MODEL_K6):
+        name = f"{_label(k6)} paper model"
+        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, motors=PAPER_MODEL)
     return runs
 
 
@@ -302,6 +350,7 @@ def run_motion(out: Path, quick: bool = False, rerun: bool = False, runs: dict |
                         for j, label in enumerate(LEG_LABELS)}
     _plot_motion(out / "fig4_motion_errors.png", runs)
     summary = {"experiment": "motion", "quick": quick, "swing": SWING, "controllers": list(runs),
+               "motors": _motors_file(),
                "mean_mrad": {n: errors[n][0].tolist() for n in runs},
                "max_mrad": {n: errors[n][1].tolist() for n in runs},
                "tripped": {n: r.tripped for n, r in runs.items()}, "beats_position": passes, "tables": tables}
@@ -338,10 +387,10 @@ def force_profile(t: float, f0: np.ndarray) -> np.ndarray:
     return np.array([0.0, 0.0, f0[2] + FORCE_AMPLITUDE * np.sin(2 * np.pi * FORCE_FREQUENCY * t)])
 
 
-def force_run(quick: bool, out: Path, rerun: bool = False) -> Run:
+def force_run(quick: bool, out: Path, rerun: bool = False, posture: str = "compatible") -> Run:
     duration = 2.0 / FORCE_FREQUENCY if quick else FORCE_DURATION
     return simulate("force", scenario="force", mode="torque", k6=FORCE_K6, swing=None, force_profile=force_profile,
-                    duration=duration, rerun=_rerun_target(out, rerun, "force"))
+                    duration=duration, rerun=_rerun_target(out, rerun, "force"), posture=posture)
 
 
 def force_metrics(run: Run, key: str = "f_hat") -> dict:
@@ -376,24 +425,40 @@ def force_metrics(run: Run, key: str = "f_hat") -> dict:
             "rms_error_z_N": float(np.sqrt(np.mean((f[steady, 2] - f_ref[steady, 2]) ** 2)))}
 
 
-def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | None = None) -> dict:
+def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | None = None,
+              posture: str = "compatible", compare: bool | None = None) -> dict:
+    """Fig. 5 metrics of the force run (reference ``posture``); ``compare`` (default: full runs that are not
+    given) also runs the other posture reference and reports its measured metrics next to them."""
     out = out / "force"
     out.mkdir(parents=True, exist_ok=True)
-    run = run or force_run(quick, out, rerun)
-    if run.tripped or len(run.time) < 2:
-        metrics = {"measured": None, "true": None}
-    else:
-        metrics = {"measured": force_metrics(run, "f_hat"), "true": force_metrics(run, "f_true")}
-    rows = [[k] + [metrics[s][k] if metrics[s] else float("nan") for s in ("measured", "true")]
+    compare = (run is None and not quick) if compare is None else compare
+    run = run or force_run(quick, out, rerun, posture)
+    metrics = _force_run_metrics(run)
+    columns = {"measured (compensated f_hat)": metrics["measured"], "true (sole contact)": metrics["true"]}
+    other_name, other_tripped = None, None
+    if compare:
+        other_name = "start" if posture == "compatible" else "compatible"
+        other = force_run(quick, out, False, other_name)
+        other_tripped = other.tripped
+        metrics[f"measured, {other_name} posture"] = _force_run_metrics(other)["measured"]
+        columns[f"measured, reference = {other_name} posture"] = metrics[f"measured, {other_name} posture"]
+    rows = [[k] + [m[k] if m else float("nan") for m in columns.values()]
             for k in ("overshoot_pct", "coupling_x_pct", "coupling_y_pct", "delay_ms", "amplitude_ratio",
                       "rms_error_z_N")]
-    table = _write_table(out / "force_metrics", ["metric", "measured (compensated f_hat)", "true (sole contact)"], rows)
+    table = _write_table(out / "force_metrics", ["metric", *columns], rows)
     if len(run.time) > 1:
         _plot_force(out / "fig5_force_tracking.png", run)
     summary = {"experiment": "force", "quick": quick, "k6": FORCE_K6, "k_f": FORCE_KF, "amplitude_N": FORCE_AMPLITUDE,
-               "frequency_Hz": FORCE_FREQUENCY, "tripped": run.tripped, "metrics": metrics, "table": table}
+               "frequency_Hz": FORCE_FREQUENCY, "posture": posture, "compared_posture": other_name,
+               "tripped": run.tripped, "compared_tripped": other_tripped, "metrics": metrics, "table": table}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
+
+
+def _force_run_metrics(run: Run) -> dict:
+    if run.tripped or len(run.time) < 2:
+        return {"measured": None, "true": None}
+    return {"measured": force_metrics(run, "f_hat"), "true": force_metrics(run, "f_true")}
 
 
 def _plot_force(path: Path, run: Run) -> None:
@@ -430,14 +495,15 @@ def run_components(out: Path, quick: bool = False, rerun: bool = False, runs: di
         runs = {"motion K6=1": simulate("motion-K6=1", k6=1.0), "motion K6=0.1": simulate("motion-K6=0.1", k6=0.1),
                 "force": force_run(quick, out, rerun)}
     shares = {name: component_shares(r) for name, r in runs.items()}
-    header = ["experiment", "joint"] + list(PAPER_COMPONENTS) + ["dominant", "(residual+integral+switch)"]
+    header = ["experiment", "joint"] + list(PAPER_COMPONENTS) + ["dominant", "ff_extra", "(residual+integral+switch)"]
     rows, dominant = [], {}
     for name, sh in shares.items():
         for j, label in enumerate(LEG_LABELS):
             vals = [float(100 * sh[c][j]) for c in PAPER_COMPONENTS]
             top = PAPER_COMPONENTS[int(np.nanargmax(vals))] if not np.all(np.isnan(vals)) else "-"
             dominant.setdefault(name, {})[label] = top
-            rows.append([name, label] + vals + [top, float(100 * sum(sh[c][j] for c in OTHER_COMPONENTS))])
+            rest = float(100 * sum(sh[c][j] for c in OTHER_COMPONENTS if c != "ff_extra"))
+            rows.append([name, label] + vals + [top, float(100 * sh["ff_extra"][j]), rest])
     table = _write_table(out / "component_shares_pct", header, rows)
     _plot_components(out / "fig6_components.png", shares)
     findings = {
@@ -530,7 +596,9 @@ def write_results(out: Path, doc: Path) -> str:
         parts += ["Not run.", ""]
     else:
         parts += [f"Hanging robot, `right_leg_swing` of {motion['swing']:g} s plus {TAIL:g} s, evaluated on the TRUE "
-                  "joint angles (simulator ground truth) against the reference q_d."
+                  "joint angles (simulator ground truth) against the reference q_d. Motor model (eq. 10 feedforward) "
+                  f"`config/{motion.get('motors', '?')}`; columns marked 'paper model' use the paper's k_tau, k_v "
+                  f"alone (`config/{PAPER_MODEL}`), columns marked 'k7=' another velocity gain than the config's."
                   + (" QUICK run (reduced K6 set)." if motion["quick"] else ""), "",
                   "RMS error sqrt(mean((q_d - q)^2)) [mrad]:", "", motion["tables"]["mean"], "",
                   "Max error max |q_d - q| [mrad]:", "", motion["tables"]["max"], ""]
@@ -545,8 +613,26 @@ def write_results(out: Path, doc: Path) -> str:
         ok = k1 and all(v["mean"] and v["max"] for v in k1.values())
         parts += [f"Target (K6 = 1 beats position control on every joint, mean and max): "
                   f"{'PASS' if ok else 'MISSED'}"
-                  + ("" if ok else f" (fails: {[j for j, v in k1.items() if not (v['mean'] and v['max'])]})") + ".",
-                  "", "Paper, Table 2 (as printed, 'rad 1e3'; no hip-yaw row). The values are too small to be RMS "
+                  + ("" if ok else f" (fails: {[j for j, v in k1.items() if not (v['mean'] and v['max'])]})") + ".", ""]
+        for name, what, keys in (("K6=0.25", "beats position control on every joint, mean and max", ("mean", "max")),
+                                 ("K6=0.1", "matches position control on mean error (not above it) on every joint",
+                                  ("mean",))):
+            p = motion["beats_position"].get(name)
+            if p is None:
+                continue
+            fails = [j for j, v in p.items() if not all(v[k] for k in keys)]
+            trip = " (the run TRIPPED)" if motion["tripped"].get(name) else ""
+            parts += [f"Target beyond the paper, with the motor model of `{motion.get('motors', '?')}`: {name} {what}: "
+                      f"{'PASS' if not fails and not trip else 'MISSED'}{trip}"
+                      + (f" (fails: {fails})" if fails else "") + ".", ""]
+            for other in (n for n in motion["beats_position"] if n.startswith(name + " k7=")):
+                p = motion["beats_position"][other]
+                fails = [j for j, v in p.items() if not all(v[k] for k in keys)]
+                trip = " (the run TRIPPED)" if motion["tripped"].get(other) else ""
+                verdict = "PASS" if not fails and not trip else "MISSED"
+                parts += [f"Same target with {other.split(' ', 1)[1]} s: {verdict}{trip}"
+                          + (f" (fails: {fails})" if fails else "") + ".", ""]
+        parts += ["Paper, Table 2 (as printed, 'rad 1e3'; no hip-yaw row). The values are too small to be RMS "
                   "errors next to Table 3's maxima (hip roll 0.020 vs 4.79); they match a mean SQUARED error in "
                   "rad^2 * 1e3, so the second table converts them to RMS [mrad] = 1e3 sqrt(value * 1e-3) for "
                   "comparison with ours:", ""]
@@ -564,8 +650,9 @@ def write_results(out: Path, doc: Path) -> str:
     else:
         parts += [f"Scenario `force` (standing, right foot on a 5 cm rigid block), K6 = {force['k6']:g}, K_f = "
                   f"{force['k_f']:g} on fx, fy, fz at the sole; f_z = f0 + {force['amplitude_N']:g} N "
-                  f"sin(2 pi {force['frequency_Hz']:g} t), f_x = f_y = 0; the reference joint angles are the start "
-                  "posture. F/T offsets are calibrated with the same robot (same seed) hanging, feet free, since the "
+                  f"sin(2 pi {force['frequency_Hz']:g} t), f_x = f_y = 0. Reference joint angles: "
+                  + POSTURE_TEXT[force.get("posture", "start")]
+                  + " F/T offsets are calibrated with the same robot (same seed) hanging, feet free, since the "
                   "feet are loaded in this scenario. Metrics after the first period: overshoot = max over the "
                   "positive apexes of (peak f_z - peak f_z_ref) / A (negative = undershoot); coupling = max |f - f_d| "
                   "/ A on x and y; delay = lag of the cross-correlation maximum of f_z vs f_z_ref; amplitude ratio = "
@@ -573,6 +660,15 @@ def write_results(out: Path, doc: Path) -> str:
                   "sole (what it regulates), 'true' the simulator's total contact force on the right sole (world "
                   "frame)." + (" QUICK run (2 periods)." if force["quick"] else ""), ""]
         parts += [force["table"], ""]
+        if force.get("compared_posture"):
+            parts += [f"Last column: the same run with the reference joint angles = "
+                      f"{force['compared_posture']} posture, for comparison"
+                      + (f" (safety trip: {force['compared_tripped']})" if force.get("compared_tripped") else "")
+                      + ". With the start posture the position feedback cancels part of the commanded force: in "
+                      "steady state (1 + K_f) J^T (f_hat - f_d) = -K_s e_q, and pressing moves the leg (the body "
+                      "rises on the position-servoed left leg, the contacts deflect: about 3 mrad of knee per 22 N, "
+                      "measured with the paper's motor model).",
+                      ""]
         if force["tripped"]:
             parts += [f"Safety trip: {force['tripped']}", ""]
         m = force["metrics"]["measured"]
@@ -591,8 +687,9 @@ def write_results(out: Path, doc: Path) -> str:
         parts += ["Not run.", ""]
     else:
         parts += ["Share of each component of dq_err: RMS over the evaluated phase / sum of the six paper components' "
-                  "RMS, per joint [%]. The last column is the rest of the command (torque residual, integral, "
-                  "switch offset), relative to the same sum.", "", comp["table"], ""]
+                  "RMS, per joint [%]. The last two columns are the rest of the command, relative to the same sum: "
+                  "ff_extra (the extra terms of the motor model beyond the paper's k_tau, k_v; 0 with the paper's "
+                  "model) and the torque residual, integral and switch offset.", "", comp["table"], ""]
         f = comp["findings_joint_counts"]
         parts += ["Paper's findings: motion control is dominated by the friction feedforward (then position "
                   "feedback); force control by the torque feedforward (then force feedback). Here, joints (of 6) whose "

@@ -4,6 +4,8 @@ with the command split into the paper's components (eq. 13-14, section 5.5).
 With ``b = M ddq + h``, ``tau_m = b_hat - J^T f_hat`` (the model's torque for the estimated motion) and
 ``r = tau_hat - tau_m`` (what the estimator's torque adds to the model)::
 
+    dq_err = K_tau tau* + ff_friction + ff_extra                (eq. 10, motor model: control/torque.py)
+
     K_tau tau* = K_tau (b_d - J^T f_ff)                         ff_torque
                + K_tau (1 + K_p) K_s e_q                        fb_position      (K6 e_q)
                + K_tau (1 + K_p) K_d de_q                       fb_velocity      (K7 de_q)
@@ -57,9 +59,10 @@ class TorqueControlLaw:
         ``dq_err`` (n,) [rad]."""
         idc, tc, t, tmp = self.inverse_dynamics, self.torque, terms, self._tmp
         tau_d = idc.update(q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, wrenches, base)
-        dq_err = tc.update(tau_d, tau_hat, dq_hat)
+        dq_err = tc.update(tau_d, tau_hat, dq_hat, q_hat, ddq_hat, t.time)
         np.multiply(tc.k_tau, idc.tau_ff, out=t.ff_torque)
         np.copyto(t.ff_friction, tc.friction)
+        np.copyto(t.ff_extra, tc.extra)
         np.multiply(self.k6, idc.e_q, out=t.fb_position)
         np.multiply(self.k7, idc.de_q, out=t.fb_velocity)
         np.subtract(idc.b_d, idc.b_hat, out=tmp)

@@ -2,11 +2,13 @@
 
 The command splits into the components of the paper's section 5.5 (all in [rad] of ``dq_err``)::
 
-    dq_err = q_des - q = ff_torque + ff_friction + fb_position + fb_velocity + fb_acceleration + fb_force
-                         + fb_torque_residual + fb_integral + position_command + switch_offset
+    dq_err = q_des - q = ff_torque + ff_friction + ff_extra + fb_position + fb_velocity + fb_acceleration
+                         + fb_force + fb_torque_residual + fb_integral + position_command + switch_offset
 
 - ``ff_torque``          K_tau (M ddq_d + h - J^T f_d)  (contacts not regulated: their measured wrench)
-- ``ff_friction``        K_v dq_hat + k_c tanh(dq_hat / v_s) + extra motor-model terms
+- ``ff_friction``        K_v dq_hat + k_c tanh(dq_hat / v_s)
+- ``ff_extra``           the motor model's extra effect terms (model workbench: deadzone, direction_gain,
+  stribeck, delay, ...), i.e. the model's prediction at (tau*, dq_hat, q_hat, ...) minus its paper part
 - ``fb_position``        K6 e_q = K_tau (1 + K_p) K_s e_q
 - ``fb_velocity``        K7 de_q = K_tau (1 + K_p) K_d de_q
 - ``fb_acceleration``    K8 dde_q = K_tau K_p M (ddq_d - ddq_hat)
@@ -29,6 +31,7 @@ from servotau.errors import ControlError
 COMPONENTS: tuple[str, ...] = (
     "ff_torque",
     "ff_friction",
+    "ff_extra",
     "fb_position",
     "fb_velocity",
     "fb_acceleration",
@@ -40,8 +43,8 @@ COMPONENTS: tuple[str, ...] = (
 )
 """Components of the command, each (n,) [rad]; they sum to ``dq_err``."""
 
-TORQUE_COMPONENTS: tuple[str, ...] = COMPONENTS[:8]
-"""The components of the torque law (eq. 13-14 plus residual and integral)."""
+TORQUE_COMPONENTS: tuple[str, ...] = COMPONENTS[:9]
+"""The components of the torque law (eq. 13-14 plus extra motor-model terms, residual and integral)."""
 
 SIGNALS: tuple[str, ...] = ("q_des", "dq_err", "tau_d", "tau_star", "tau_hat", "e_tau", "e_q", "de_q", "dde_q")
 """Other joint signals, each (n,): [rad], [rad], [N m] x 4, [rad], [rad/s], [rad/s^2]."""

@@ -3,13 +3,20 @@
 ::
 
     tau*   = tau_d + K_p e_tau + K_i integral(e_tau) dt,   e_tau = tau_d - tau_hat      (eq. 11)
-    dq_err = K_tau tau* + K_v dq_hat [+ k_c tanh(dq_hat / v_s)] [+ extra effects]          (eq. 10)
+    dq_err = K_tau tau* + K_v dq_hat [+ k_c tanh(dq_hat / v_s)] + extra                   (eq. 10)
+    extra  = model(tau*, dq_hat, q_hat, ddq_hat, t, q_des) - (K_tau tau* + K_v dq_hat + k_c sign(dq_hat))
     q_des  = q + dq_err                                     (the servo only takes desired angles)
 
 ``K_tau``, ``K_v``, ``k_c`` are the identified motor model (:class:`~servotau.identification.MotorModel`).
-The integral is clamped so that ``|K_i integral| <= integral_limit`` (anti-windup). Extra effect terms of a
-motor model are used when the model can evaluate them (``MotorModel.predict`` accepts them); otherwise they
-are ignored, listed in :attr:`JointTorqueController.ignored_effects` and logged once.
+The integral is clamped so that ``|K_i integral| <= integral_limit`` (anti-windup).
+
+``extra`` is what the motor model's extra effect terms (model workbench: ``deadzone``, ``direction_gain``,
+``stribeck``, ``delay``, ...) add to the paper's linear model, evaluated one tick at a time by an
+:class:`~servotau.identification.workbench.online.OnlineModel` per joint (effects with memory keep their
+state there; it advances once per :meth:`JointTorqueController.update`). Every term of the file is used: a
+term the workbench does not know raises at construction. With a ``delay`` term the model reads this tick's
+command; ``OnlineModel.command`` solves ``q_des = q_hat + model(q_des)`` for it. A joint without ``k_c``
+then gets exactly the model's prediction; with ``k_c`` the Coulomb sign is the smoothed one above.
 
 Joints without gains (position-controlled) have every gain at 0: their outputs are 0.
 """
@@ -17,12 +24,14 @@ Joints without gains (position-controlled) have every gain at 0: their outputs a
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from servotau.errors import ControlError, IdentificationError
 from servotau.identification.motor_params import MotorModel
+from servotau.identification.workbench.online import OnlineModel
 
 from .config import ControlConfig, JointGains
 
@@ -52,8 +61,9 @@ class JointTorqueController:
         self.sign_velocity = float(sign_velocity)
         self.k_tau, self.k_v, self.k_c = np.zeros(n), np.zeros(n), np.zeros(n)
         self.k_p, self.k_i, self.integral_limit = np.zeros(n), np.zeros(n), np.zeros(n)
-        self._extra: list[tuple[int, MotorModel]] = []
-        self.ignored_effects: dict[str, list[str]] = {}
+        # Joints with extra terms: (index, on-line model, reads q_des, k_tau, k_v, k_c)
+        self._online: list[tuple[int, OnlineModel, bool, float, float, float]] = []
+        self.extra_signals: tuple[str, ...] = ()  # signals besides tau and dq that the extra terms read
         motors = dict(getattr(motors, "models", motors))  # MotorParameters' `in` raises for unknown joints
         for j, g in gains.items():
             if j not in self.joint_names:
@@ -64,14 +74,9 @@ class JointTorqueController:
             self.k_tau[i], self.k_v[i], self.k_c[i] = m.k_tau, m.k_v, m.k_c or 0.0
             self.k_p[i], self.k_i[i], self.integral_limit[i] = g.k_p, g.k_i, g.integral_limit
             if m.extra:
-                try:
-                    m.predict(np.zeros(1), np.zeros(1))
-                    self._extra.append((i, m))
-                except (IdentificationError, TypeError, ValueError):
-                    self.ignored_effects[j] = list(m.extra)
-        if self.ignored_effects:
-            log.warning("motor-model extra terms the model cannot evaluate are ignored (linear model used): %s",
-                        self.ignored_effects)
+                om = _online_model(j, m, self.period)
+                self._online.append((i, om, "q_des" in om.signals, m.k_tau, m.k_v, m.k_c or 0.0))
+                self.extra_signals += tuple(s for s in om.signals[2:] if s not in self.extra_signals)
         self.mask = np.isin(np.arange(n), [self.joint_names.index(j) for j in gains])
         # Clamp of the integral itself [N m s]; joints with k_i = 0 do not integrate.
         self._dt_integrates = (self.k_i > 0) * self.period
@@ -84,7 +89,10 @@ class JointTorqueController:
         self.e_tau = np.zeros(n)  # [N m]
         self.tau_star = np.zeros(n)  # [N m] eq. 11
         self.integral_term = np.zeros(n)  # [N m] K_i integral(e_tau)
-        self.friction = np.zeros(n)  # [rad] K_v dq_hat + k_c tanh(dq_hat / v_s) + extra
+        self.friction = np.zeros(n)  # [rad] K_v dq_hat + k_c tanh(dq_hat / v_s)
+        self.extra = np.zeros(n)  # [rad] extra motor-model terms (0 on joints without any)
+        self.q_des_model = np.full(n, np.nan)  # [rad] the command the model's q_des history records
+        self._ticks = 0
         self.dq_err = np.zeros(n)  # [rad] eq. 10
         self._tmp = np.zeros(n)
 
@@ -97,9 +105,24 @@ class JointTorqueController:
         self.integral.fill(0.0)
         self.integral_term.fill(0.0)
 
-    def update(self, tau_d: np.ndarray, tau_hat: np.ndarray, dq_hat: np.ndarray) -> np.ndarray:
+    @property
+    def has_extra(self) -> bool:
+        """True if a joint's motor model has extra terms."""
+        return bool(self._online)
+
+    def update(self, tau_d: np.ndarray, tau_hat: np.ndarray, dq_hat: np.ndarray, q_hat: np.ndarray | None = None,
+               ddq_hat: np.ndarray | None = None, time: float | None = None) -> np.ndarray:
         """``dq_err`` (n,) [rad] for desired torques ``tau_d`` [N m], estimated torques ``tau_hat`` [N m] and
-        estimated velocities ``dq_hat`` [rad/s]; advances the integral by one period."""
+        estimated velocities ``dq_hat`` [rad/s]; advances the integral and the extra terms' state by one period.
+
+        Args:
+            q_hat: (n,) [rad] estimated angles, needed by extra terms that read ``q`` or ``q_des``.
+            ddq_hat: (n,) [rad/s^2] estimated accelerations, needed by ``elastic`` and ``backlash``.
+            time: [s] robot time of the tick (default: ticks since construction times the period).
+
+        Raises:
+            ControlError: An extra term needs ``q_hat`` or ``ddq_hat`` and it was not given.
+        """
         tmp = self._tmp
         np.subtract(tau_d, tau_hat, out=self.e_tau)
         # tau* = tau_d + K_p e_tau + K_i integral
@@ -119,11 +142,45 @@ class JointTorqueController:
             np.tanh(tmp, out=tmp)
             tmp *= self.k_c
             self.friction += tmp
-        for i, m in self._extra:  # extra effect terms: what predict() adds to the linear model
-            tau_i, dq_i = self.tau_star[i : i + 1], np.asarray(dq_hat)[i : i + 1]
-            linear = m.k_tau * tau_i[0] + m.k_v * dq_i[0] + (m.k_c or 0.0) * np.sign(dq_i[0])
-            self.friction[i] += float(m.predict(tau_i, dq_i)[0]) - linear
-        # dq_err = K_tau tau* + friction
+        if self._online:
+            self._update_extra(dq_hat, q_hat, ddq_hat, time)
+        # dq_err = K_tau tau* + friction + extra
         np.multiply(self.k_tau, self.tau_star, out=self.dq_err)
         self.dq_err += self.friction
+        if self._online:
+            self.dq_err += self.extra
+        self._ticks += 1
         return self.dq_err
+
+    def _update_extra(self, dq_hat, q_hat, ddq_hat, time) -> None:
+        """``extra`` [rad]: the on-line model at (tau*, dq_hat, ...) minus its linear and Coulomb part."""
+        if q_hat is None and ("q" in self.extra_signals or "q_des" in self.extra_signals):
+            raise ControlError(f"q_hat is None: expected (n,) angles [rad] for the extra motor-model terms "
+                               f"(they read {list(self.extra_signals)})")
+        if ddq_hat is None and "ddq" in self.extra_signals:
+            raise ControlError(f"ddq_hat is None: expected (n,) accelerations [rad/s^2] for the extra motor-model "
+                               f"terms (they read {list(self.extra_signals)})")
+        t = self._ticks * self.period if time is None or time != time else float(time)  # NaN: not set
+        for i, om, reads_q_des, k_tau, k_v, k_c in self._online:
+            tau, dq = float(self.tau_star[i]), float(dq_hat[i])
+            q = None if q_hat is None else float(q_hat[i])
+            ddq = None if ddq_hat is None else float(ddq_hat[i])
+            if reads_q_des:
+                q_des = om.command(q, tau, dq, t=t, ddq=ddq)
+                model = q_des - q
+            else:
+                model = om.step(tau, dq, q=q, t=t, ddq=ddq)
+                q_des = math.nan if q is None else q + model
+            self.q_des_model[i] = q_des
+            coulomb = k_c * (1.0 if dq > 0 else -1.0 if dq < 0 else 0.0)
+            self.extra[i] = model - (k_tau * tau + k_v * dq + coulomb)
+
+
+def _online_model(joint: str, m: MotorModel, period: float) -> OnlineModel:
+    """The on-line model of ``joint``, checked on one sample of every signal (unknown terms or shapes raise)."""
+    try:
+        om = m.online(period)
+        om.predict(0.0, 0.0, q=0.0, q_des=0.0, t=0.0, ddq=0.0)
+    except (IdentificationError, KeyError, TypeError, ValueError) as err:
+        raise ControlError(f'joint "{joint}": motor-model extra terms {list(m.extra)}: {err}') from err
+    return om

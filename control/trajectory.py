@@ -73,3 +73,89 @@ def right_leg_swing(joint_names: Sequence[str], q_start: np.ndarray, duration: f
     step = {"RLEG_JOINT1": q0["RLEG_JOINT1"] + 0.04, "RLEG_JOINT2": -1.1, "RLEG_JOINT3": 1.2, "RLEG_JOINT4": -0.1,
             "RLEG_JOINT5": q0["RLEG_JOINT5"] - 0.04}
     return JointTrajectory(joint_names, q_start, [(s, lift), (2 * s, step), (3 * s, lift), (4 * s, q0)])
+
+
+class ForceCompatiblePosture:
+    """Joint reference compatible with a force task (paper 5.4: "the reference joint angles were set to be
+    compatible with the force task").
+
+    On a contact that is not perfectly rigid, exerting a force moves the joints a little (here the body rises on
+    the position-servoed other leg and the contacts deflect). A fixed posture reference ``q0`` then fights the
+    force task: in steady state ``(1 + K_f) J^T (f_hat - f_d) = -K_s e_q`` (eq. 12 with ``tau = tau_d``), so the
+    position feedback cancels part of the commanded force. The compatible reference is the posture the robot
+    takes when the force IS the reference. With the contact compliance ``C`` [m/N] (task-space displacement of
+    the contact point per force change: a property of the environment, here the other leg and the contacts)::
+
+        x     = J (q_hat - q0)                    [m]   task-space displacement of the contact point
+        q_ref = q0 + J^+ clip(C (f_d - f0), x_max)      (J^+ = J^T (J J^T)^-1, on the task joints)
+
+    ``C`` is calibrated during the first ``calibration`` seconds (reference ``q0`` meanwhile): least squares of
+    ``x`` on ``f_hat - f0`` (the axes whose reference varies) with an intercept and a linear trend (a slow
+    drift is not compliance). The reference
+    depends on the force reference, not on the measured motion, so the position feedback keeps its stiffness
+    (a force task alone has none along its axes; following the measured motion instead drifts and, with little
+    stiffness left, oscillates), holds every other direction, and ``x_max`` bounds how far the task moves it.
+    """
+
+    def __init__(self, q0: np.ndarray, joints: np.ndarray, calibration: float, max_displacement: float = 0.01):
+        """
+        Args:
+            q0: (n,) [rad] posture reference at the start force ``f0`` (e.g. the start posture).
+            joints: Indices of the joints that move the contact (the task Jacobian's columns used).
+            calibration: [s] > 0 of data (from the first update on) to estimate ``C``; the force must vary then.
+            max_displacement: [m] > 0: largest task-space displacement of the reference, per axis.
+        """
+        for name, v in (("calibration", calibration), ("max_displacement", max_displacement)):
+            if not v > 0:
+                raise ControlError(f"{name} = {v!r}: expected > 0")
+        self.q0 = np.array(q0, dtype=float)
+        self.joints = np.asarray(joints, dtype=int)
+        self.calibration = float(calibration)
+        self.max_displacement = float(max_displacement)
+        n = self.q0.size
+        self.point = TrajectoryPoint(self.q0.copy(), np.zeros(n), np.zeros(n))
+        self.f0: np.ndarray | None = None  # [N] measured force at the first update
+        self.t0: float | None = None  # [s] time of the first update
+        self.compliance: np.ndarray | None = None  # [m/N] (k, k) C, once calibrated
+        self.displacement = np.zeros(0)  # [m] C (f_d - f0), clipped, of the last update
+        self._samples: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def update(self, time: float, q_hat: np.ndarray, task_jacobian: np.ndarray | None, f_hat: np.ndarray,
+               f_d: np.ndarray) -> TrajectoryPoint:
+        """The reference at ``time`` [s] for the estimated angles ``q_hat`` (n,), the task Jacobian (k, n) of the
+        last control tick (None: ``q0``), the measured and desired task forces (k,) [N]. The returned point is
+        the same object every call, refreshed in place."""
+        q = self.point.q
+        np.copyto(q, self.q0)
+        if task_jacobian is None:
+            return self.point
+        j = task_jacobian[:, self.joints]
+        if self.compliance is None:
+            f_hat = np.array(f_hat, dtype=float)
+            if self.f0 is None:
+                self.f0, self.t0 = f_hat.copy(), float(time)
+            x = j @ (np.asarray(q_hat)[self.joints] - self.q0[self.joints])
+            self._samples.append((float(time) - self.t0, x, f_hat - self.f0, np.array(f_d, dtype=float)))
+            if float(time) - self.t0 >= self.calibration:
+                self.compliance = self._fit()
+            return self.point
+        x_ref = np.clip(self.compliance @ (np.asarray(f_d) - self.f0), -self.max_displacement, self.max_displacement)
+        q[self.joints] += j.T @ np.linalg.solve(j @ j.T, x_ref)
+        self.displacement = x_ref
+        return self.point
+
+    def _fit(self) -> np.ndarray:
+        """``C`` from the calibration samples; only the axes whose reference varied are regressors (the others'
+        measured forces follow them through coupling, and would share their compliance at random)."""
+        t = np.array([s[0] for s in self._samples])
+        x = np.array([s[1] for s in self._samples])
+        df = np.array([s[2] for s in self._samples])
+        spread = np.ptp(np.array([s[3] for s in self._samples]), axis=0)
+        axes = np.flatnonzero(spread > 0.1 * spread.max()) if spread.max() > 0 else np.zeros(0, dtype=int)
+        self._samples = []
+        c = np.zeros((x.shape[1], df.shape[1]))
+        if axes.size:
+            a = np.column_stack([df[:, axes], np.ones_like(t), t])
+            coef, *_ = np.linalg.lstsq(a, x, rcond=None)
+            c[:, axes] = coef[: axes.size].T
+        return c  # (k, k): x = C df

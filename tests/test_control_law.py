@@ -44,6 +44,8 @@ def test_components_sum_to_the_command(force, k_i):
         dq_err = law.update(terms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, w)
     np.testing.assert_allclose(terms.component_sum(), dq_err, atol=1e-15)
     assert np.abs(dq_err[:6]).min() > 0 and not dq_err[6:].any()
+    # example.toml has a deadzone term on the ankle roll only: its own component, streamed like the others
+    assert terms.ff_extra[5] != 0 and not terms.ff_extra[:5].any() and not terms.ff_extra[6:].any()
     assert np.abs(terms.fb_integral).max() > 0 if k_i else not terms.fb_integral.any()
 
 

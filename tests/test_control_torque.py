@@ -6,7 +6,7 @@ import pytest
 from servotau.config import CONFIG_DIR
 from servotau.control.config import JointGains
 from servotau.control.torque import JointTorqueController
-from servotau.errors import ControlError, IdentificationError
+from servotau.errors import ConfigError, ControlError
 from servotau.identification.motor_params import MotorModel, MotorParameters
 from servotau.simrobot.model import JOINT_NAMES
 
@@ -65,24 +65,110 @@ def test_integral_is_clamped_without_windup():
     assert not tc.integral.any() and not tc.integral_term.any()
 
 
-def test_extra_effect_terms_follow_the_motor_model():
-    """Extra terms: used as MotorModel.predict evaluates them, or ignored (and listed) if it cannot."""
-    motors = MotorParameters.load_toml(CONFIG_DIR / "motors" / "example.toml")
-    ankle = "RLEG_JOINT5"
-    assert motors[ankle].extra
-    tc = JointTorqueController(JOINT_NAMES, motors, {ankle: JointGains(k_p=0.0)}, 1e-3, 1e-6)
-    i = JOINT_NAMES.index(ankle)
-    tau, dq = np.zeros(30), np.zeros(30)
-    tau[i], dq[i] = 12.0, 0.4
-    dq_err = tc.update(tau, tau, dq)[i]
-    m = motors[ankle]
-    try:
-        expected = float(m.predict(np.array([12.0]), np.array([0.4]))[0])
-        assert ankle not in tc.ignored_effects
-    except IdentificationError:
-        expected = m.k_tau * 12.0 + m.k_v * 0.4 + (m.k_c or 0.0)
-        assert tc.ignored_effects == {ankle: list(m.extra)}
-    assert dq_err == pytest.approx(expected, rel=1e-6)
+MOTORS_WITH_EXTRA = """version = 1
+
+[joints.RLEG_JOINT3]
+k_tau = 5.1e-05
+k_v = 0.006561
+loss = "asymmetric"
+w = 100.0
+provenance = "test"
+
+[joints.RLEG_JOINT3.extra.deadzone]
+coefficient = 0.0004
+shape = { band = 0.0003, damping_share = 0.33 }
+
+[joints.RLEG_JOINT3.extra.stribeck]
+coefficient = 0.0007
+shape = { v_s = 0.04, v_eps = 0.01 }
+
+[joints.RLEG_JOINT3.extra.cogging]
+coefficient = 0.0002
+shape = { period = 0.08, phase = 0.3 }
+
+[joints.RLEG_JOINT3.extra.motor_lag]
+coefficient = 0.5
+shape = { time_constant = 0.02 }
+"""
+
+
+def _extra_file(tmp_path, text=MOTORS_WITH_EXTRA):
+    path = tmp_path / "motors.toml"
+    path.write_text(text)
+    return path
+
+
+def test_extra_terms_of_the_motor_file_change_the_command_as_the_model_predicts(tmp_path):
+    """With extra terms in the file, dq_err is the model's prediction at (tau*, dq, q, t), tick by tick."""
+    motors = MotorParameters.load_toml(_extra_file(tmp_path))
+    knee = motors["RLEG_JOINT3"]
+    tc = JointTorqueController(JOINT_NAMES, motors, {"RLEG_JOINT3": JointGains(k_p=0.5)}, 1e-3)
+    rng = np.random.default_rng(1)
+    ticks = 300
+    t = 1e-3 * np.arange(ticks)
+    tau_d, tau_hat = 30 * np.sin(2 * np.pi * t), rng.normal(0, 3, ticks)
+    dq = 0.3 * np.sin(2 * np.pi * 2 * t) + rng.normal(0, 0.01, ticks)
+    q = 0.8 + 0.05 * np.cos(2 * np.pi * 2 * t)
+    got, tau_star, linear = np.zeros(ticks), np.zeros(ticks), np.zeros(ticks)
+    vec = {k: np.zeros(30) for k in ("tau_d", "tau_hat", "dq", "q")}
+    for k in range(ticks):
+        for name, v in (("tau_d", tau_d), ("tau_hat", tau_hat), ("dq", dq), ("q", q)):
+            vec[name][KNEE] = v[k]
+        got[k] = tc.update(vec["tau_d"], vec["tau_hat"], vec["dq"], vec["q"], np.zeros(30), t[k])[KNEE]
+        tau_star[k] = tc.tau_star[KNEE]
+        linear[k] = knee.k_tau * tau_star[k] + knee.k_v * dq[k]
+        assert tc.extra[KNEE] == pytest.approx(got[k] - linear[k], abs=1e-15)
+    # The workbench's batch evaluation of the same model on the same signals (an independent code path).
+    expected = knee.predict(tau_star, dq, q=q, t=t)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert np.max(np.abs(got - linear)) > 1e-4  # the extra terms do change the command (by up to ~1 mrad)
+    others = np.ones(30, dtype=bool)
+    others[KNEE] = False
+    assert not tc.extra[others].any()
+
+
+def test_delay_term_solves_the_command_it_reads(tmp_path):
+    """A `delay` term reads this tick's q_des: the controller's command satisfies q_des - q = model(q_des)."""
+    text = MOTORS_WITH_EXTRA.split("[joints.RLEG_JOINT3.extra.deadzone]")[0]
+    text += "[joints.RLEG_JOINT3.extra.delay]\ncoefficient = 0.6\nshape = { delay = 0.005 }\n"
+    motors = MotorParameters.load_toml(_extra_file(tmp_path, text))
+    knee = motors["RLEG_JOINT3"]
+    tc = JointTorqueController(JOINT_NAMES, motors, {"RLEG_JOINT3": JointGains(k_p=0.0)}, 1e-3)
+    tau, dq, q = np.zeros(30), np.zeros(30), np.zeros(30)
+    q_des = []
+    for k in range(40):
+        tau[KNEE], dq[KNEE], q[KNEE] = 20.0 * (k >= 10), 0.1, 0.5 + 1e-4 * k
+        dq_err = tc.update(tau, tau, dq, q, np.zeros(30), 1e-3 * k)[KNEE]
+        q_des.append(q[KNEE] + dq_err)
+        delayed = q_des[k - 5] if k >= 5 else q_des[0]
+        model = knee.k_tau * tau[KNEE] + knee.k_v * dq[KNEE] + 0.6 * (q_des[k] - delayed)
+        assert dq_err == pytest.approx(model, abs=1e-12)
+    assert max(abs(d) for d in np.diff(q_des)) > 2e-3  # the torque step moved the command through the term
+
+
+def test_unknown_extra_term_is_a_config_error_naming_the_file_and_field(tmp_path):
+    """A term the workbench does not know (or a wrong shape) raises ConfigError naming the file and the field."""
+    from servotau.config import load_toml
+    from servotau.control.config import ControlConfig
+    from servotau.simrobot.sim import SimConfig, SimRobot
+
+    info = SimRobot(SimConfig.named("hanging", seed=0)).info
+    data = load_toml(CONFIG_DIR / "control.toml").data
+    text = MOTORS_WITH_EXTRA.replace("[joints.RLEG_JOINT3.extra.cogging]", "[joints.RLEG_JOINT3.extra.gear_whine]")
+    for joint in ("RLEG_JOINT0", "RLEG_JOINT1", "RLEG_JOINT2", "RLEG_JOINT4", "RLEG_JOINT5"):
+        text += f'[joints.{joint}]\nk_tau = 1e-4\nk_v = 0.007\nloss = "least_squares"\nprovenance = "test"\n'
+    path = _extra_file(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        ControlConfig.from_mapping({**data, "motors": str(path)}, info, file="ctl.toml")
+    msg = str(err.value)
+    assert str(path) in msg and "joints.RLEG_JOINT3.extra.gear_whine" in msg and "expected one of" in msg, msg
+    assert "cogging" in msg  # the known effects are listed
+    path.write_text(text.replace("gear_whine]", "cogging]").replace("period = 0.08", "wavelength = 0.08"))
+    with pytest.raises(ConfigError, match=r"joints\.RLEG_JOINT3\.extra\.cogging.*wavelength"):
+        ControlConfig.from_mapping({**data, "motors": str(path)}, info, file="ctl.toml")
+    with pytest.raises(ControlError, match="RLEG_JOINT3.*gear_whine"):  # built directly: ControlError
+        bad = MotorParameters.load_toml(_extra_file(tmp_path, MOTORS_WITH_EXTRA.replace("cogging]", "gear_whine]")))
+        JointTorqueController(JOINT_NAMES, bad, {"RLEG_JOINT3": JointGains()}, 1e-3)
 
 
 def test_missing_motor_model_or_unknown_joint_raise():

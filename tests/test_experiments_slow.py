@@ -37,6 +37,29 @@ def test_motion_torque_control_at_k6_1_beats_position_control_on_every_joint(sum
     assert not failing, failing
 
 
+@pytest.mark.xfail(strict=True, reason="measured: K6 = 0.25 trips the knee velocity limit (5.08 rad/s) 1.1 s into the "
+                   "swing: a 9-10 Hz oscillation driven by the friction feedforward on the delayed velocity estimate; "
+                   "with k7 = 0.003 it runs but hip yaw misses (RMS 1.52 vs 0.471 mrad)")
+def test_motion_k6_quarter_beats_position_control_on_every_joint(summaries):
+    """Beyond the paper, with the improved motor model: K6 = 0.25 runs without a trip and has a lower mean and max
+    error than the position servo on every right-leg joint."""
+    m = summaries["motion"]
+    assert not m["tripped"]["K6=0.25"], m["tripped"]["K6=0.25"]
+    failing = {j: v for j, v in m["beats_position"]["K6=0.25"].items() if not (v["mean"] and v["max"])}
+    assert not failing, failing
+
+
+@pytest.mark.xfail(strict=True, reason="measured: K6 = 0.1 beats position control on hip pitch and knee only (e.g. hip "
+                   "yaw RMS 2.99 vs 0.471 mrad): the torque-estimate error divided by a lower stiffness")
+def test_motion_k6_tenth_matches_position_control_on_mean_error(summaries):
+    """Beyond the paper, with the improved motor model: K6 = 0.1 runs without a trip and its RMS error is not
+    above the position servo's on any right-leg joint."""
+    m = summaries["motion"]
+    assert not m["tripped"]["K6=0.1"], m["tripped"]["K6=0.1"]
+    failing = {j: v for j, v in m["beats_position"]["K6=0.1"].items() if not v["mean"]}
+    assert not failing, failing
+
+
 def test_force_apex_error_is_within_five_percent(summaries):
     """Paper 5.4: the f_z apex overshoots by at most 5 % of the amplitude (paper ~10 %), undershoot counted too."""
     m = summaries["force"]["metrics"]["measured"]

@@ -1,0 +1,53 @@
+"""Tests of servotau.control.trajectory: the force-compatible posture reference (paper 5.4)."""
+
+import numpy as np
+import pytest
+
+from servotau.control.trajectory import ForceCompatiblePosture
+from servotau.errors import ControlError
+
+JOINTS = np.arange(2, 8)
+
+
+def _jacobian(rng):
+    j = np.zeros((3, 12))
+    j[:, JOINTS] = rng.normal(0, 0.3, (3, 6))
+    return j
+
+
+def test_reference_moves_the_contact_by_the_calibrated_compliance_times_the_force_change():
+    """After calibration, J (q_ref - q0) = C (f_d - f0) with C of the data (drift and other axes ignored)."""
+    rng = np.random.default_rng(0)
+    jac, q0 = _jacobian(rng), rng.normal(0, 0.5, 12)
+    c_z = np.array([1e-5, -2e-5, 4e-5])  # [m/N] displacement per N of f_z
+    f0 = np.array([2.0, -1.0, 250.0])
+    pinv = np.linalg.pinv(jac[:, JOINTS])
+    posture = ForceCompatiblePosture(q0, JOINTS, calibration=2.0)
+    dt = 1e-3
+    for k in range(2001):
+        t = k * dt
+        f_d = np.array([0.0, 0.0, f0[2] + 40 * np.sin(np.pi * t)])
+        f_hat = f0 + (f_d - f0) * 0.6 + np.array([0.5 * np.sin(np.pi * t), 0.3, 0.0])  # x, y follow z
+        x = c_z * (f_hat[2] - f0[2]) + 1e-4 * t  # plus a slow drift, not compliance
+        q_hat = q0.copy()
+        q_hat[JOINTS] += pinv @ x
+        ref = posture.update(t, q_hat, jac, f_hat, f_d)
+        if posture.compliance is None:
+            np.testing.assert_array_equal(ref.q, q0)  # calibration: the start posture
+    np.testing.assert_allclose(posture.compliance[:, 2], c_z, rtol=1e-6)
+    assert not posture.compliance[:, :2].any()  # axes whose reference does not vary are not regressors
+    f_d = np.array([0.0, 0.0, f0[2] + 30.0])
+    ref = posture.update(2.5, q0, jac, f0, f_d)
+    np.testing.assert_allclose(jac @ (ref.q - q0), c_z * 30.0, rtol=1e-9, atol=1e-15)
+    others = np.setdiff1d(np.arange(12), JOINTS)
+    np.testing.assert_array_equal(ref.q[others], q0[others])
+    ref = posture.update(2.6, q0, jac, f0, np.array([0.0, 0.0, f0[2] + 1e4]))  # 40 cm: clipped to x_max
+    np.testing.assert_allclose(np.abs(jac @ (ref.q - q0)), 0.01, rtol=1e-9)
+
+
+def test_bad_settings_raise():
+    """A calibration time or a displacement bound that is not > 0 raises ControlError naming it."""
+    with pytest.raises(ControlError, match="calibration"):
+        ForceCompatiblePosture(np.zeros(12), JOINTS, calibration=0.0)
+    with pytest.raises(ControlError, match="max_displacement"):
+        ForceCompatiblePosture(np.zeros(12), JOINTS, calibration=1.0, max_displacement=-1.0)
