@@ -29,6 +29,9 @@ FORMAT_VERSION = 1
 BASES = ("fixed", "floating")
 """``fixed``: base locked (the paper's hanging robot); ``floating``: base state from the estimator."""
 
+VELOCITY_FEEDFORWARDS = ("estimate", "reference")
+"""Velocity read by the motor-model feedforward (eq. 10): ``estimate`` dq_hat (the paper), ``reference`` dq_d."""
+
 AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 """Wrench axes, in the order of HAL wrenches ``[fx, fy, fz, tx, ty, tz]``."""
 
@@ -139,6 +142,7 @@ class ControlConfig:
     force: ForceTask | None = None
     sign_velocity: float = 0.01  # [rad/s] Coulomb sign smoothing: k_c tanh(dq / sign_velocity)
     fade_time: float = 0.5  # [s] the bumpless-switch offset fades to zero over this time
+    velocity_feedforward: str = "estimate"  # velocity of the motor-model feedforward: dq_hat or dq_d
     source: str = "<direct>"  # file the config came from
     _torque_mask: np.ndarray = field(default=None, repr=False, compare=False)
 
@@ -164,6 +168,9 @@ class ControlConfig:
             raise ControlError(f"safety = {self.safety!r}: expected SafetyLimits for {len(names)} joints")
         if self.base not in BASES:
             raise ControlError(f"base = {self.base!r}: expected one of {list(BASES)}")
+        if self.velocity_feedforward not in VELOCITY_FEEDFORWARDS:
+            raise ControlError(f"velocity_feedforward = {self.velocity_feedforward!r}: expected one of "
+                               f"{list(VELOCITY_FEEDFORWARDS)}")
         contacts = tuple(self.contacts)
         for c in contacts:
             if c not in FT_SENSOR_NAMES:
@@ -217,8 +224,8 @@ class ControlConfig:
 
     @classmethod
     def from_section(cls, root: Section, info: RobotInfo) -> ControlConfig:
-        root.check_keys(["version", "motors", "base", "contacts", "sign_velocity", "fade_time", "torque_joints",
-                         "defaults", "joints", "force", "safety"])
+        root.check_keys(["version", "motors", "base", "contacts", "sign_velocity", "fade_time", "velocity_feedforward",
+                         "torque_joints", "defaults", "joints", "force", "safety"])
         version = root.int("version")
         if version != FORMAT_VERSION:
             raise root.error("version", version, f"{FORMAT_VERSION}")
@@ -289,6 +296,7 @@ class ControlConfig:
             force=force,
             sign_velocity=root.float("sign_velocity", 0.01, min=0.0, strict_min=True, unit="rad/s"),
             fade_time=root.float("fade_time", 0.5, min=0.0, unit="s"),
+            velocity_feedforward=root.str("velocity_feedforward", "estimate", choices=VELOCITY_FEEDFORWARDS),
             source=root.file,
         )
 

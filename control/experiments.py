@@ -34,7 +34,9 @@ K6_VALUES = (1.0, 0.5, 0.25, 0.1)
 PAPER_COMPONENTS = ("ff_torque", "ff_friction", "fb_position", "fb_velocity", "fb_acceleration", "fb_force")
 OTHER_COMPONENTS = ("ff_extra", "fb_torque_residual", "fb_integral", "switch_offset")
 
-MOTION_EXTRA = ((0.25, 0.003),)  # (K6, k7 [s]) runs beside the sweep: more velocity feedback than the config's
+# (K6, k7 [s]) runs beside the sweep: velocity feedback following K6, k7 = 0.001 s / K6 (the config's k7 at K6 = 1)
+MOTION_EXTRA = ((0.5, 0.002), (0.25, 0.004), (0.1, 0.01))
+MOTION_REFERENCE_FF = (1.0, 0.25, 0.1)  # K6 of the runs beside the sweep with velocity_feedforward = "reference"
 PAPER_MODEL = "motors/hrp2_sim_identified.toml"  # the paper's motor model (k_tau, k_v), for comparison
 PAPER_MODEL_K6 = (1.0, 0.25)  # K6 of the runs with PAPER_MODEL beside the sweep
 SETTLE = 0.5  # [s] position mode, holding the start posture; F/T offsets calibrated here
@@ -100,9 +102,10 @@ class Run:
         return out
 
 
-def _control_config(info, k6: float | None, force: bool, k7: float | None = None, motors: str | None = None):
+def _control_config(info, k6: float | None, force: bool, k7: float | None = None, motors: str | None = None,
+                    velocity_feedforward: str | None = None):
     """config/control.toml with every torque joint at ``k6`` (and ``k7`` [s] if given), the motor file ``motors``
-    if given and, if ``force``, the paper's force task."""
+    and the ``velocity_feedforward`` if given and, if ``force``, the paper's force task."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
 
@@ -121,6 +124,8 @@ def _control_config(info, k6: float | None, force: bool, k7: float | None = None
             joint.pop("k_d", None)
     if motors is not None:
         data["motors"] = motors
+    if velocity_feedforward is not None:
+        data["velocity_feedforward"] = velocity_feedforward
     if force:
         data["force"] = {"sensor": "right_ankle", "frame": "ft_right_ankle", "offset": [0.0, 0.0, -0.02],
                          "axes": ["fx", "fy", "fz"], "k_f": [FORCE_KF] * 3}
@@ -153,7 +158,7 @@ def _ft_offsets_hanging(seed: int, est_cfg) -> np.ndarray:
 def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: float | None = 1.0,
              swing: float | None = SWING, force_profile=None, duration: float | None = None, seed: int = SEED,
              rerun: str | None = None, posture: str = "compatible", k7: float | None = None,
-             motors: str | None = None) -> Run:
+             motors: str | None = None, velocity_feedforward: str | None = None) -> Run:
     """One run: settle in position mode, switch to ``mode``, hold ``HOLD`` s, then the motion or force task.
 
     Args:
@@ -169,6 +174,8 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
         rerun: ``save:FILE`` etc. to stream the run to Rerun, or None.
         k7: Velocity gain [s] of the torque joints (None: the config's).
         motors: Motor-parameter file relative to config/ (None: the config's).
+        velocity_feedforward: ``estimate`` or ``reference`` velocity in the motor-model feedforward (None: the
+            config's).
         posture: With a force task, the joint reference: ``compatible`` follows the measured motion along the
             task directions (:class:`~servotau.control.trajectory.ForceCompatiblePosture`, paper 5.4), ``start``
             is the start posture.
@@ -184,7 +191,8 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     legs = np.array([info.joint_names.index(j) for j in LEG])
     est_cfg = EstimatorConfig.from_toml(variant="low_delay")
     estimator = TorqueEstimator(info, est_cfg)
-    manager = ControlManager(info, _control_config(info, k6, force_profile is not None, k7, motors))
+    manager = ControlManager(info, _control_config(info, k6, force_profile is not None, k7, motors,
+                                                  velocity_feedforward))
     stream = None
     if rerun:
         from servotau.viewer import RerunStream, open_recording
@@ -321,6 +329,9 @@ def motion_runs(quick: bool, out: Path, rerun: bool = False) -> dict[str, Run]:
     for k6, k7 in (() if quick else MOTION_EXTRA):
         name = f"{_label(k6)} k7={k7:g}"
         runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, k7=k7)
+    for k6 in (() if quick else MOTION_REFERENCE_FF):
+        name = f"{_label(k6)} ff=reference"
+        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, velocity_feedforward="reference")
     for k6 in (() if quick else PAPER_MODEL_K6):
         name = f"{_label(k6)} paper model"
         runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, motors=PAPER_MODEL)
@@ -598,7 +609,9 @@ def write_results(out: Path, doc: Path) -> str:
         parts += [f"Hanging robot, `right_leg_swing` of {motion['swing']:g} s plus {TAIL:g} s, evaluated on the TRUE "
                   "joint angles (simulator ground truth) against the reference q_d. Motor model (eq. 10 feedforward) "
                   f"`config/{motion.get('motors', '?')}`; columns marked 'paper model' use the paper's k_tau, k_v "
-                  f"alone (`config/{PAPER_MODEL}`), columns marked 'k7=' another velocity gain than the config's."
+                  f"alone (`config/{PAPER_MODEL}`), columns marked 'k7=' another velocity gain than the config's [s], "
+                  "columns marked 'ff=reference' the motor-model feedforward on the reference velocity dq_d instead "
+                  "of the estimate dq_hat (config `velocity_feedforward`, a departure from eq. 10)."
                   + (" QUICK run (reduced K6 set)." if motion["quick"] else ""), "",
                   "RMS error sqrt(mean((q_d - q)^2)) [mrad]:", "", motion["tables"]["mean"], "",
                   "Max error max |q_d - q| [mrad]:", "", motion["tables"]["max"], ""]
@@ -625,12 +638,13 @@ def write_results(out: Path, doc: Path) -> str:
             parts += [f"Target beyond the paper, with the motor model of `{motion.get('motors', '?')}`: {name} {what}: "
                       f"{'PASS' if not fails and not trip else 'MISSED'}{trip}"
                       + (f" (fails: {fails})" if fails else "") + ".", ""]
-            for other in (n for n in motion["beats_position"] if n.startswith(name + " k7=")):
+            for other in (n for n in motion["beats_position"] if n.startswith((name + " k7=", name + " ff="))):
                 p = motion["beats_position"][other]
                 fails = [j for j, v in p.items() if not all(v[k] for k in keys)]
                 trip = " (the run TRIPPED)" if motion["tripped"].get(other) else ""
                 verdict = "PASS" if not fails and not trip else "MISSED"
-                parts += [f"Same target with {other.split(' ', 1)[1]} s: {verdict}{trip}"
+                unit = " s" if " k7=" in other else ""
+                parts += [f"Same target with {other.split(' ', 1)[1]}{unit}: {verdict}{trip}"
                           + (f" (fails: {fails})" if fails else "") + ".", ""]
         parts += ["Paper, Table 2 (as printed, 'rad 1e3'; no hip-yaw row). The values are too small to be RMS "
                   "errors next to Table 3's maxima (hip roll 0.020 vs 4.79); they match a mean SQUARED error in "

@@ -113,9 +113,11 @@ class JointTorqueController:
     def update(self, tau_d: np.ndarray, tau_hat: np.ndarray, dq_hat: np.ndarray, q_hat: np.ndarray | None = None,
                ddq_hat: np.ndarray | None = None, time: float | None = None) -> np.ndarray:
         """``dq_err`` (n,) [rad] for desired torques ``tau_d`` [N m], estimated torques ``tau_hat`` [N m] and
-        estimated velocities ``dq_hat`` [rad/s]; advances the integral and the extra terms' state by one period.
+        velocities ``dq_hat`` [rad/s]; advances the integral and the extra terms' state by one period.
 
         Args:
+            dq_hat: (n,) [rad/s] velocities the motor model reads: the estimated ones (the paper's eq. 10), or the
+                reference's (ControlConfig.velocity_feedforward = "reference", passed by the control law).
             q_hat: (n,) [rad] estimated angles, needed by extra terms that read ``q`` or ``q_des``.
             ddq_hat: (n,) [rad/s^2] estimated accelerations, needed by ``elastic`` and ``backlash``.
             time: [s] robot time of the tick (default: ticks since construction times the period).

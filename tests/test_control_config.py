@@ -68,6 +68,7 @@ def test_joint_table_overrides_defaults_in_either_unit():
     ("base", "wobbly", "base", "fixed"),
     ("sign_velocity", 0.0, "sign_velocity", "> 0"),
     ("fade_time", -1.0, "fade_time", ">= 0"),
+    ("velocity_feedforward", "measured", "velocity_feedforward", "'estimate', 'reference'"),
     ("contacts", ["left_knee"], "contacts", "F/T sensors"),
     ("safety.max_torque", -5.0, "safety.max_torque", "> 0"),
     ("safety.max_velocity", math.inf, "safety.max_velocity", "finite"),
@@ -95,6 +96,8 @@ def test_bad_field_names_the_field_and_the_expected_value(path, value, field, ex
     (lambda: SafetyLimits.uniform(30, max_torque=0.0), "SafetyLimits.max_torque"),
     (lambda: ControlConfig(JOINT_NAMES, {"RLEG_JOINT3": JointGains()}, {}, SafetyLimits.uniform(30)), "motor model"),
     (lambda: ControlConfig(JOINT_NAMES, {"KNEE": JointGains()}, {}, SafetyLimits.uniform(30)), "KNEE"),
+    (lambda: ControlConfig(JOINT_NAMES, {}, {}, SafetyLimits.uniform(30), velocity_feedforward="desired"),
+     "velocity_feedforward"),
 ])
 def test_direct_construction_is_validated(build, field):
     """The dataclasses built in code raise ControlError naming the field and the expected value."""

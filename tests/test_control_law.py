@@ -13,12 +13,13 @@ from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH, default_joint_map, 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]
 
 
-def _config(force=True, k_i=0.0):
+def _config(force=True, k_i=0.0, velocity_feedforward="estimate"):
     motors = MotorParameters.load_toml(CONFIG_DIR / "motors" / "example.toml")
     gains = {j: JointGains(k_p=2.0, k_s=500.0 + 100 * i, k_d=5.0 + i, k_i=k_i, integral_limit=3.0)
              for i, j in enumerate(LEG)}
     task = ForceTask("right_ankle", "ft_right_ankle", axes=("fx", "fz", "ty"), k_f=(0.5, 1.0, 0.2)) if force else None
-    return ControlConfig(JOINT_NAMES, gains, motors, SafetyLimits.uniform(30), contacts=("right_ankle",), force=task)
+    return ControlConfig(JOINT_NAMES, gains, motors, SafetyLimits.uniform(30), contacts=("right_ankle",), force=task,
+                         velocity_feedforward=velocity_feedforward)
 
 
 def _inputs(seed=0):
@@ -88,3 +89,20 @@ def test_terms_share_the_law_buffers():
     assert terms.tau_star is law.torque.tau_star
     law.clear(terms)
     assert not any(v.any() for v in terms.components().values())
+
+
+@pytest.mark.parametrize("source", ["estimate", "reference"])
+def test_velocity_feedforward_reads_the_configured_velocity(source):
+    """ff_friction is K_v dq + k_c tanh(dq / v_s) on dq_hat ("estimate") or dq_d ("reference"); fb_* keep dq_hat."""
+    cfg = _config(force=False, velocity_feedforward=source)
+    law = TorqueControlLaw(cfg, str(MODEL_PATH), 1e-3)
+    terms = law.make_terms()
+    q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, w, rng = _inputs(seed=3)
+    dq_err = law.update(terms, q_hat, dq_hat, ddq_hat, rng.normal(0, 20, 30), q_d, dq_d, ddq_d, w)
+    dq_ff = dq_hat if source == "estimate" else dq_d
+    k_v, k_c = cfg.motor_vector("k_v"), cfg.motor_vector("k_c")
+    expected = k_v * dq_ff + k_c * np.tanh(dq_ff / cfg.sign_velocity)
+    np.testing.assert_allclose(terms.ff_friction[:5], expected[:5], rtol=1e-12)  # joint 5 has extra terms
+    assert np.abs(terms.ff_friction[:5]).min() > 0
+    np.testing.assert_allclose(terms.fb_velocity, law.k7 * (dq_d - dq_hat), rtol=1e-12)
+    np.testing.assert_allclose(terms.component_sum(), dq_err, atol=1e-15)
