@@ -16,7 +16,7 @@ from types import MappingProxyType
 import numpy as np
 
 from servotau.config import CONFIG_DIR, Section, load_toml, resolve_config_path
-from servotau.errors import ConfigError, ControlError, ServotauError
+from servotau.errors import ConfigError, ControlError
 from servotau.hal.types import FT_SENSOR_NAMES, RobotInfo
 from servotau.identification.motor_params import MotorModel, MotorParameters
 
@@ -308,7 +308,8 @@ def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: flo
         ConfigError: Naming the motor file, the field ``joints.<joint>.extra.<term>`` and what was expected.
     """
     from servotau.identification.workbench.effects import effect_names
-    from servotau.identification.workbench.online import OnlineModel
+
+    from .torque import online_model
 
     known = effect_names()
     for joint, m in motors.items():
@@ -317,10 +318,10 @@ def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: flo
             if name not in known:
                 raise ConfigError(f"{file}: field '{field_}': unknown motor-model term '{name}': expected one of "
                                   f"the model workbench's effects {known}")
-            one = MotorModel(k_tau=m.k_tau, k_v=m.k_v, extra={name: term}, provenance=m.provenance)
             try:
-                OnlineModel(one, period).predict(0.0, 0.0, q=0.0, q_des=0.0, t=0.0, ddq=0.0)
-            except (ServotauError, KeyError, TypeError, ValueError) as err:
+                one = MotorModel(k_tau=m.k_tau, k_v=m.k_v, extra={name: term}, provenance=m.provenance)
+                online_model(joint, one, period)
+            except ControlError as err:
                 raise ConfigError(f"{file}: field '{field_}' (shape {dict(term.shape)}): {err}: expected the "
                                   f"shape parameters of effect '{name}'") from err
 

@@ -74,7 +74,7 @@ class JointTorqueController:
             self.k_tau[i], self.k_v[i], self.k_c[i] = m.k_tau, m.k_v, m.k_c or 0.0
             self.k_p[i], self.k_i[i], self.integral_limit[i] = g.k_p, g.k_i, g.integral_limit
             if m.extra:
-                om = _online_model(j, m, self.period)
+                om = online_model(j, m, self.period)
                 self._online.append((i, om, "q_des" in om.signals, m.k_tau, m.k_v, m.k_c or 0.0))
                 self.extra_signals += tuple(s for s in om.signals[2:] if s not in self.extra_signals)
         self.mask = np.isin(np.arange(n), [self.joint_names.index(j) for j in gains])
@@ -178,8 +178,12 @@ class JointTorqueController:
             self.extra[i] = model - (k_tau * tau + k_v * dq + coulomb)
 
 
-def _online_model(joint: str, m: MotorModel, period: float) -> OnlineModel:
-    """The on-line model of ``joint``, checked on one sample of every signal (unknown terms or shapes raise)."""
+def online_model(joint: str, m: MotorModel, period: float) -> OnlineModel:
+    """The on-line model of ``joint``, checked on one sample of every signal.
+
+    Raises:
+        ControlError: An extra term or its shape parameters cannot be evaluated (named with the joint).
+    """
     try:
         om = m.online(period)
         om.predict(0.0, 0.0, q=0.0, q_des=0.0, t=0.0, ddq=0.0)
