@@ -52,9 +52,10 @@ def test_motion_k6_quarter_beats_position_control_on_every_joint(summaries):
 
 
 @pytest.mark.xfail(strict=True, reason="measured: K6 = 0.1 beats position control on hip pitch and knee only (RMS hip "
-                   "yaw 2.99, hip roll 1.05, ankle pitch 5.69, ankle roll 2.61 vs 0.471, 0.721, 4.00, 1.17 mrad): the "
-                   "torque-estimate error divided by a lower stiffness; k7 = 0.01 s or velocity_feedforward = "
-                   "'reference' leave the same 4 joints above (e.g. hip yaw 3.06, ankle roll 2.54 / 2.50 mrad)")
+                   "yaw 2.99, hip roll 1.05, ankle pitch 5.69, ankle roll 2.61 vs 0.471, 0.721, 4.00, 1.17 mrad): a "
+                   "command error over a lower stiffness (hip yaw: a static offset at rest); k7 = 0.01 s or "
+                   "velocity_feedforward = 'reference' leave the same 4 joints above (e.g. hip yaw 3.06, "
+                   "ankle roll 2.54 / 2.50 mrad)")
 def test_motion_k6_tenth_matches_position_control_on_mean_error(summaries):
     """Beyond the paper, with the improved motor model: K6 = 0.1 runs without a trip and its RMS error is not
     above the position servo's on any right-leg joint."""
