@@ -77,18 +77,8 @@ def record_hanging(seconds: float = 8.0, seed: int = 0) -> tuple[Recording, list
     """Hanging trial; also returns the first 1.5 s (still) for the F/T offset calibration."""
     robot = SimRobot(SimConfig.named("hanging", seed=seed))
     q0 = robot.read().q.copy()
-    frames, q_des, t, tau = [], [], [], []
-    n = int(round((1.5 + seconds) / robot.period))
-    for _ in range(n):
-        q = swing(q0, robot.time, 1.5)
-        robot.step(q)
-        frames.append(robot.read())
-        q_des.append(q)
-        gt = robot.ground_truth()
-        t.append(gt.time)
-        tau.append(gt.tau.copy())
-    still = frames[300:1500]
-    return Recording(frames, np.array(q_des), np.array(t), np.array(tau), 3.0, robot.info), still
+    rec = _record(robot, lambda t: swing(q0, t, 1.5), 1.5 + seconds, start=3.0)
+    return rec, rec.frames[300:1500]
 
 
 def record_standing(seconds: float = 6.0, seed: int = 0) -> tuple[Recording, list]:
@@ -103,15 +93,22 @@ def record_standing(seconds: float = 6.0, seed: int = 0) -> tuple[Recording, lis
     ]
     for p in pushes:
         robot.add_push(p)
+    rec = _record(robot, lambda t: q0, seconds, start=1.2)
+    return rec, rec.frames[500:1000]
+
+
+def _record(robot: SimRobot, command, seconds: float, start: float) -> Recording:
+    """Step ``robot`` for ``seconds`` with desired angles ``command(t)`` [rad]; evaluation from ``start`` [s]."""
     frames, q_des, t, tau = [], [], [], []
     for _ in range(int(round(seconds / robot.period))):
-        robot.step(q0)
+        q = command(robot.time)
+        robot.step(q)
         frames.append(robot.read())
-        q_des.append(q0)
+        q_des.append(q)
         gt = robot.ground_truth()
         t.append(gt.time)
         tau.append(gt.tau.copy())
-    return Recording(frames, np.array(q_des), np.array(t), np.array(tau), 1.2, robot.info), frames[500:1000]
+    return Recording(frames, np.array(q_des), np.array(t), np.array(tau), start, robot.info)
 
 
 def run(rec: Recording, config: EstimatorConfig, use_q_des: bool = False, timing: bool = False) -> dict:

@@ -27,7 +27,7 @@ from .protocol import (
     info_from_json,
     keys,
 )
-from .realtime import check_priority, set_realtime_priority
+from .realtime import set_realtime_priority
 from .types import SensorFrame
 from .zenoh_session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 
@@ -73,7 +73,6 @@ class ZenohBackend(Backend):
         truth: bool = True,
         realtime_priority: int = 0,
     ):
-        check_priority(realtime_priority)
         self.keys = keys(robot)
         self.robot_name = robot
         self.frame_timeout = frame_timeout
