@@ -35,3 +35,22 @@ def test_granted_priority_is_requested_for_the_calling_thread(monkeypatch):
         (pid, policy, param.sched_priority)))
     assert realtime.set_realtime_priority(50) is True
     assert calls == [(0, realtime.os.SCHED_FIFO, 50)]
+
+
+def test_zenoh_backend_from_config_asks_for_its_priority_before_the_session_opens(tmp_path, monkeypatch):
+    """[hal.zenoh] realtime_priority reaches set_realtime_priority, before zenoh's threads exist."""
+    from hal_support import endpoint, free_port, robot_server
+
+    from servotau.hal import open_backend, zenoh_backend
+
+    calls = []
+    real_session = zenoh_backend.Session
+    monkeypatch.setattr(zenoh_backend, "set_realtime_priority", lambda p: calls.append(("priority", p)))
+    monkeypatch.setattr(zenoh_backend, "Session", lambda *a: calls.append(("session",)) or real_session(*a))
+    port = free_port()
+    cfg = tmp_path / "hal.toml"
+    cfg.write_text(f'[hal]\nbackend = "zenoh"\n[hal.zenoh]\nrobot = "fake"\nconnect = ["{endpoint(port)}"]\n'
+                   "realtime_priority = 50\n")
+    with robot_server(tmp_path, port), open_backend(cfg) as b:
+        assert b.read().seq >= 0
+    assert calls[:2] == [("priority", 50), ("session",)]
