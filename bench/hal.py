@@ -17,9 +17,12 @@ truth: a pure controller).
 - ``*_fifo50``: the same figures with both processes under SCHED_FIFO priority 50
   (``realtime_priority``, hal/realtime.py; as a robot's control loop runs), if the user may.
 - ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
-- ``baseline_rtt_p50_us`` / ``_p99_us``: a bare Zenoh Python ping-pong with the same sizes and
-  settings (bench/zenoh_pingpong.py), in the same run; ``rtt_*_ratio_to_baseline``: what the HAL
-  adds, as a ratio that a shared machine's load changes less than the absolute figures.
+- ``baseline_rtt_p50_us`` / ``_p99_us``: a bare Zenoh Python ping-pong with the same sizes,
+  settings and threading (bench/zenoh_pingpong.py, ``channel``), in the same run;
+  ``rtt_*_ratio_to_baseline``: what the HAL adds, as a ratio that a shared machine's load changes
+  less than the absolute figures. ``baseline_threads_*``: the same ping-pong through Python
+  callback threads (the HAL's pattern before); ``threads_to_channel_*_ratio``: what the channel
+  pattern saves.
 
 Wall-clock figures depend on the machine's load: ``cpu_count`` and ``loadavg_1min`` are reported.
 """
@@ -113,12 +116,12 @@ def bench_realtime(robot: str, scenario: str | None, duration: float, priority: 
             f"realtime_holds{sfx}": st["holds"]}
 
 
-def bench_baseline(ticks: int) -> dict:
+def bench_baseline(ticks: int, pattern: str = "channel") -> dict:
     """Bare Zenoh ping-pong (bench/zenoh_pingpong.py), the floor under ``rtt_*``, in this run."""
     port, script = free_port(), str(Path(__file__).with_name("zenoh_pingpong.py"))
-    robot = subprocess.Popen([sys.executable, script, "robot", str(port), str(ticks)], stdout=subprocess.PIPE,
+    robot = subprocess.Popen([sys.executable, script, "robot", str(port), str(ticks), pattern], stdout=subprocess.PIPE,
                              text=True)
-    ctl = subprocess.Popen([sys.executable, script, "controller", str(port), str(ticks)])
+    ctl = subprocess.Popen([sys.executable, script, "controller", str(port), str(ticks), pattern])
     try:
         out, _ = robot.communicate(timeout=180)
         ctl.wait(30)
@@ -126,7 +129,8 @@ def bench_baseline(ticks: int) -> dict:
         stop_process(robot)
         stop_process(ctl)
     r = json.loads(out)
-    return {"baseline_rtt_p50_us": r["rtt_p50_us"], "baseline_rtt_p99_us": r["rtt_p99_us"]}
+    prefix = "baseline" if pattern == "channel" else f"baseline_{pattern}"
+    return {f"{prefix}_rtt_p50_us": r["rtt_p50_us"], f"{prefix}_rtt_p99_us": r["rtt_p99_us"]}
 
 
 def bench_codec() -> dict:
@@ -151,13 +155,16 @@ def main() -> int:
                     help="also run both parts with both processes under SCHED_FIFO at this priority (0: skip; "
                          "without the permission they warn and run with ordinary scheduling)")
     args = ap.parse_args()
-    out = {**bench_codec(), **bench_baseline(args.ticks), **bench_lockstep(args.robot, args.scenario, args.ticks),
+    out = {**bench_codec(), **bench_baseline(args.ticks), **bench_baseline(args.ticks, "threads"),
+           **bench_lockstep(args.robot, args.scenario, args.ticks),
            **bench_realtime(args.robot, args.scenario, args.duration),
            **(bench_lockstep(args.robot, args.scenario, args.ticks, args.fifo) if args.fifo else {}),
            **(bench_realtime(args.robot, args.scenario, args.duration, args.fifo) if args.fifo else {}),
            "robot": args.robot, "cpu_count": os.cpu_count(), "loadavg_1min": os.getloadavg()[0]}
     out["rtt_p50_ratio_to_baseline"] = out["rtt_p50_us"] / out["baseline_rtt_p50_us"]
     out["rtt_p99_ratio_to_baseline"] = out["rtt_p99_us"] / out["baseline_rtt_p99_us"]
+    for q in ("p50", "p99"):  # > 1: the HAL's channel pattern saves that much over a callback thread
+        out[f"threads_to_channel_{q}_ratio"] = out[f"baseline_threads_rtt_{q}_us"] / out[f"baseline_rtt_{q}_us"]
     out = {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
     print(json.dumps(out) if args.json else json.dumps(out, indent=2))
     return 0

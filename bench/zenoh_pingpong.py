@@ -4,12 +4,18 @@ Same session settings as the HAL (hal/zenoh_session.py: loopback, express publis
 priority, the HAL's GIL switch interval) and the same payload sizes (a 30-joint frame and
 command), but no decoding, firmware, robot or bookkeeping. The "robot" publishes a ping and sends
 the next one from the callback that receives the pong (as the HAL server ticks in its command
-callback); the "controller" hands each ping from its callback thread to its main thread, which
-answers (as ``ZenohBackend.read``/``write`` do). bench/hal.py reports the HAL's round trip as a
-ratio to this one, measured in the same run.
+callback). Two threading patterns:
 
-    python bench/zenoh_pingpong.py robot PORT N     # prints {"rtt_p50_us": ..., "rtt_p99_us": ...}
-    python bench/zenoh_pingpong.py controller PORT N
+- ``channel`` (the HAL's): the robot's callback runs in zenoh's network thread (``direct``), the
+  controller's main thread takes each ping from a ring channel (as ``ZenohBackend.read``);
+- ``threads`` (the HAL before): both callbacks run in zenoh-python's callback thread and the
+  controller hands each ping to its main thread through a ``threading.Condition``.
+
+bench/hal.py reports the HAL's round trip as a ratio to ``channel``, measured in the same run, and
+``threads`` as a ratio to ``channel`` (what the channel pattern saves).
+
+    python bench/zenoh_pingpong.py robot PORT N [channel|threads]   # prints {"rtt_p50_us": ..., "rtt_p99_us": ...}
+    python bench/zenoh_pingpong.py controller PORT N [channel|threads]
 """
 
 from __future__ import annotations
@@ -22,9 +28,10 @@ import time
 import numpy as np
 import zenoh
 
-from servotau.hal.zenoh_session import Session, zenoh_config
+from servotau.hal.zenoh_session import Session, callback, zenoh_config
 
 FRAME_BYTES, COMMAND_BYTES, WARMUP = 518, 272, 200
+PATTERNS = ("channel", "threads")
 
 
 def _publisher(s: Session, key: str):
@@ -32,7 +39,7 @@ def _publisher(s: Session, key: str):
                                         priority=zenoh.Priority.REAL_TIME))
 
 
-def robot(port: int, n: int) -> dict:
+def robot(port: int, n: int, pattern: str) -> dict:
     s = Session(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]))
     pub, ping = _publisher(s, "bench/ping"), bytes(FRAME_BYTES)
     rtt, t_sent, done = [], [0.0], threading.Event()
@@ -45,7 +52,7 @@ def robot(port: int, n: int) -> dict:
         t_sent[0] = time.perf_counter()
         pub.put(ping)
 
-    s.keep(s.z.declare_subscriber("bench/pong", zenoh.handlers.Callback(on_pong)))
+    s.keep(s.z.declare_subscriber("bench/pong", callback(on_pong, direct=pattern == "channel")))
     while not pub.matching_status.matching:  # the controller subscribed
         time.sleep(0.01)
     time.sleep(0.2)
@@ -57,30 +64,39 @@ def robot(port: int, n: int) -> dict:
     return {"rtt_p50_us": float(np.percentile(r, 50)), "rtt_p99_us": float(np.percentile(r, 99))}
 
 
-def controller(port: int, n: int) -> None:
+def controller(port: int, n: int, pattern: str) -> None:
     s = Session(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"]))
     pub, pong = _publisher(s, "bench/pong"), bytes(COMMAND_BYTES)
-    cond, box = threading.Condition(), []
+    if pattern == "channel":
+        pings = s.keep(s.z.declare_subscriber("bench/ping", zenoh.handlers.RingChannel(64)))
+        for _ in range(n + WARMUP):
+            pings.recv().payload.to_bytes()
+            pub.put(pong)
+    else:
+        cond, box = threading.Condition(), []
 
-    def on_ping(sample) -> None:
-        buf = sample.payload.to_bytes()
-        with cond:
-            box.append(buf)
-            cond.notify()
+        def on_ping(sample) -> None:
+            buf = sample.payload.to_bytes()
+            with cond:
+                box.append(buf)
+                cond.notify()
 
-    s.keep(s.z.declare_subscriber("bench/ping", zenoh.handlers.Callback(on_ping)))
-    for _ in range(n + WARMUP):
-        with cond:
-            if not cond.wait_for(lambda: box, 10.0):
-                break
-            box.clear()
-        pub.put(pong)
+        s.keep(s.z.declare_subscriber("bench/ping", callback(on_ping)))
+        for _ in range(n + WARMUP):
+            with cond:
+                if not cond.wait_for(lambda: box, 10.0):
+                    break
+                box.clear()
+            pub.put(pong)
     s.close()
 
 
 if __name__ == "__main__":
     role, port, count = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+    pattern = sys.argv[4] if len(sys.argv) > 4 else "channel"
+    if pattern not in PATTERNS:
+        sys.exit(f"pattern {pattern!r}: expected one of {list(PATTERNS)}")
     if role == "robot":
-        print(json.dumps(robot(port, count)), flush=True)
+        print(json.dumps(robot(port, count, pattern)), flush=True)
     else:
-        controller(port, count)
+        controller(port, count, pattern)

@@ -107,7 +107,8 @@ class RobotServer:
         safety = self.config.safety.for_lockstep() if self.lockstep else self.config.safety
         self.firmware = Firmware(self.info, safety)
         # Everything below is guarded by _cond; a tick runs in the thread that triggers it: the command
-        # callback in lock-step (no thread hand-off on the critical path), else the run() thread.
+        # callback (zenoh's network thread) in lock-step, no thread hand-off on the critical path; else
+        # the run() thread.
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._serving = False
@@ -128,7 +129,7 @@ class RobotServer:
         self.late_ticks = 0
         self._session: Session | None = None
 
-    # -- zenoh callbacks (zenoh-python's callback thread) ------------------------------------------
+    # -- zenoh callbacks (zenoh-python's callback thread; commands: zenoh's network thread) ---------
     def _on_command(self, sample: zenoh.Sample) -> None:
         t = time.monotonic()
         buf = sample.payload.to_bytes()
@@ -256,7 +257,8 @@ class RobotServer:
                                                      priority=zenoh.Priority.DATA_HIGH))
         self._truth_wanted = False  # somebody subscribes to the truth (no encoding for nobody)
         s.keep(self._pub_truth.declare_matching_listener(callback(self._on_truth_matching)))
-        s.keep(z.declare_subscriber(k.command, callback(self._on_command)))
+        # direct: in lock-step the command ticks the robot in zenoh's network thread, no thread hand-over
+        s.keep(z.declare_subscriber(k.command, callback(self._on_command, direct=True)))
         s.keep(z.liveliness().declare_subscriber(k.alive_controller, callback(self._on_controller_liveliness),
                                                  history=True))
         s.keep(z.declare_queryable(k.info, callback(self._on_query)))

@@ -94,9 +94,11 @@ class Session:
         _open.discard(self)
 
 
-def callback(fn):
-    """A zenoh callback handler running ``fn`` in zenoh-python's Python callback thread."""
-    return zenoh.handlers.Callback(fn)
+def callback(fn, *, direct: bool = False):
+    """A zenoh callback handler running ``fn`` in zenoh-python's Python callback thread, or with
+    ``direct`` in zenoh's network thread itself (one thread hand-over less per message; ``fn`` then
+    delays the next message of that link while it runs: keep it short and never block in it)."""
+    return zenoh.handlers.Callback(fn, indirect=not direct)
 
 
 def _close_all() -> None:
