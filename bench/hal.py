@@ -12,6 +12,9 @@ truth: a pure controller).
 
 - ``lockstep_rtf``: lock-step, simulated seconds per wall second (target >= 2).
 - ``rtt_p50_us`` / ``rtt_p99_us``: lock-step, frame published -> its command received, robot side.
+- ``lockstep_cpu_us_per_tick_controller`` / ``_robot``: CPU time of each process (all its threads,
+  zenoh's included) per lock-step tick: the HAL's own cost, which a shared machine's load changes
+  much less than the wall-clock figures.
 - ``realtime_late_fraction``: real-time mode (1 kHz), fraction of ticks starting more than one
   period late, over ``--duration`` seconds.
 - ``*_fifo50``: the same figures with both processes under SCHED_FIFO priority 50
@@ -97,11 +100,14 @@ def _control(backend: ZenohBackend, seconds: float | None = None, ticks: int | N
 def bench_lockstep(robot: str, scenario: str | None, ticks: int, priority: int = 0) -> dict:
     with _server(robot, scenario, "lockstep", priority) as b:
         _control(b, ticks=200)  # warm up
+        cpu0, robot_cpu0 = time.process_time(), b.status()["process_cpu_s"]
         n, wall = _control(b, ticks=ticks)
-        st = b.status()
+        cpu, st = time.process_time() - cpu0, b.status()
     sfx = f"_fifo{priority}" if priority else ""
     return {f"lockstep_rtf{sfx}": n * b.info.period / wall, f"lockstep_tick_us{sfx}": wall / n * 1e6,
-            f"rtt_p50_us{sfx}": st["rtt_p50_us"], f"rtt_p99_us{sfx}": st["rtt_p99_us"]}
+            f"rtt_p50_us{sfx}": st["rtt_p50_us"], f"rtt_p99_us{sfx}": st["rtt_p99_us"],
+            f"lockstep_cpu_us_per_tick_controller{sfx}": cpu / n * 1e6,
+            f"lockstep_cpu_us_per_tick_robot{sfx}": (st["process_cpu_s"] - robot_cpu0) / n * 1e6}
 
 
 def bench_realtime(robot: str, scenario: str | None, duration: float, priority: int = 0) -> dict:

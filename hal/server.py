@@ -189,7 +189,8 @@ class RobotServer:
 
     # -- public ------------------------------------------------------------------------------------
     def status(self) -> dict:
-        """Firmware state and counters, clock mode, timing: JSON-ready (also on ``.../status``)."""
+        """Firmware state and counters, clock mode, timing (``process_cpu_s``: the process's CPU time so far
+        [s]): JSON-ready (also on ``.../status``)."""
         n = min(self._n_rtt, _RTT_WINDOW)
         rtt = self._rtt[:n] * 1e6
         with self._cond:
@@ -201,7 +202,7 @@ class RobotServer:
             "controller_alive": self._controller_alive,
             "rtt_p50_us": float(np.percentile(rtt, 50)) if n else None,
             "rtt_p99_us": float(np.percentile(rtt, 99)) if n else None,
-            "rtt_samples": n, **fw,
+            "rtt_samples": n, "process_cpu_s": time.process_time(), **fw,
         }
 
     def stop(self) -> None:
