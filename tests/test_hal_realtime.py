@@ -54,3 +54,21 @@ def test_zenoh_backend_from_config_asks_for_its_priority_before_the_session_open
     with robot_server(tmp_path, port), open_backend(cfg) as b:
         assert b.read().seq >= 0
     assert calls[:2] == [("priority", 50), ("session",)]
+
+
+def test_timer_slack_is_set_for_the_calling_thread():
+    """The real-time robot loop sleeps with a 1 us timer slack instead of spinning (Linux)."""
+    import threading
+
+    result = {}
+
+    def in_a_thread():  # the slack is per thread: leave the test runner's alone
+        result["set"] = realtime.set_timer_slack(1000)
+        result["read"] = realtime.timer_slack()
+
+    t = threading.Thread(target=in_a_thread)
+    t.start()
+    t.join()
+    if realtime.timer_slack() is None:
+        pytest.skip("no prctl timer slack on this platform")
+    assert result == {"set": True, "read": 1000}
