@@ -24,9 +24,6 @@ RANK_MISSES = {
                   "term ranks first but removes 4 % (< min_gain); the verdict is 'unexplained', at the largest effort",
 }
 FALL_MISSES = {
-    "deadzone": "inside a 3 mrad position dead band the error is undetermined (the servo gives no torque and the "
-                "joint drifts under the load): the 10 % of samples inside the band carry 63 % of the squared "
-                "residual, and the 15 % within 0.3 mrad of it 94 %: fall 0.490",
     "saturation": "see RANK_MISSES: fall -0.06",
 }
 

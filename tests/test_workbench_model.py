@@ -26,7 +26,7 @@ LIBRARY = ("coulomb", "coulomb_asym", "stribeck", "stiction", "deadzone", "direc
 
 SHAPES = {
     "coulomb": {"v_eps": 0.01}, "coulomb_asym": {"v_eps": 0.02}, "stribeck": {"v_s": 0.08, "v_eps": 0.01},
-    "stiction": {"v_th": 0.01}, "deadzone": {"band": 3e-4, "damping_share": 0.67},
+    "stiction": {"v_th": 0.01}, "deadzone": {"band": 3e-4, "damping_share": 0.67, "v_th": 0.02},
     "direction_gain": {"v_eps": 0.02}, "backlash": {"window": 0.011, "tau_band": 5.0, "gain": 1.0, "lag": 0.005},
     "load_friction": {"v_eps": 0.02}, "cogging": {"period": 0.08, "phase": 0.3}, "thermal_drift": {"tau_th": 30.0},
     "saturation": {"u_sat": 2e-3, "damping_share": 0.67}, "elastic": {"window": 0.011, "lag": 0.002},

@@ -12,7 +12,7 @@ effect                    phi                                                   
 ``coulomb_asym``          ``|s(dq, v_eps)|``                                     dq
 ``stribeck``              ``s(dq, v_eps) exp(-(dq / v_s)^2)``                    dq
 ``stiction``              ``z exp(-(dq / v_th)^2)``, z = sign of the last move   dq history (a latch)
-``deadzone``              ``clip(u / band, -1, 1)``                              tau, dq
+``deadzone``              ``c + (1 - |c|) z exp(-(dq / v_th)^2)``, see below    tau, dq (+ a latch if v_th)
 ``direction_gain``        ``s(dq, v_eps) u``                                     tau, dq
 ``load_friction``         ``|tau| s(dq, v_eps)``                                 tau, dq
 ``backlash``              ``a (1 + gain exp(-(tau / tau_band)^2))``              tau, ddq (+ history if lag)
@@ -23,6 +23,11 @@ effect                    phi                                                   
 ``motor_lag``             ``lag(u, time_constant) - u``                          tau, dq history (a lag)
 ``delay``                 ``q_des(t) - q_des(t - delay)``                        q_des history
 ========================  =====================================================  ==========================
+
+``deadzone``: ``c = clip(m / band, -1, 1)`` with the servo effort ``m = u - damping_share u_v``, and
+``z`` the sign of the last ``|m| > band`` (``v_th = 0``: no latch, ``phi = c``). A dead band on the position
+error lets the joint rest anywhere inside it with no servo torque: held by friction after a push it stays
+at the edge it was pushed to (``z``); crossing the band freely (fast) it is on average at the centre.
 
 ``a`` is the acceleration ``ddq`` (centred SG of ``q`` over ``window``, or the estimator's), delayed by
 ``lag`` like the torque estimate (see :func:`inertia`).
@@ -135,8 +140,17 @@ def stiction(s: Signals, v_th: float) -> np.ndarray:
     return direction_latch(dq, v_th) * np.exp(-((dq / v_th) ** 2))
 
 
-def deadzone(s: Signals, band: float, damping_share: float = 0.0) -> np.ndarray:
-    return np.clip((s["u"] - damping_share * s["u_v"]) / band, -1.0, 1.0)
+def deadzone(s: Signals, band: float, damping_share: float = 0.0, v_th: float = 0.0) -> np.ndarray:
+    """A step of the error at zero servo effort ``m = u - damping_share u_v`` [rad], smoothed over ``band``
+    [rad]; with ``v_th > 0`` [rad/s], where the effort is inside the band the joint rests at the edge of the
+    dead band it was last pushed against (the sign of the last ``|m| > band``), fading to the band's centre
+    as it moves faster than ``v_th`` (crossing the band freely)."""
+    m = s["u"] - damping_share * s["u_v"]
+    step = np.clip(m / band, -1.0, 1.0)
+    if v_th <= 0.0:
+        return step
+    rest = direction_latch(m, band) * np.exp(-((s["dq"] / v_th) ** 2))
+    return step + (1.0 - np.abs(step)) * rest
 
 
 def direction_gain(s: Signals, v_eps: float) -> np.ndarray:
@@ -243,6 +257,30 @@ class _StictionOnline:
         self.z = self._z(x["dq"])
 
 
+class _DeadzoneOnline:
+    """``deadzone`` on-line: the step, and the latch of the sign of the last effort beyond the band."""
+
+    def __init__(self, shape: Mapping[str, float], period: float):
+        self.band, self.share, self.v_th = shape["band"], shape.get("damping_share", 0.0), shape.get("v_th", 0.0)
+        self.z = 0.0
+
+    def _m(self, x: Mapping[str, float]) -> float:
+        return x["u"] - self.share * x["u_v"]
+
+    def value(self, x: Mapping[str, float]) -> float:
+        m = self._m(x)
+        step = min(1.0, max(-1.0, m / self.band))
+        if self.v_th <= 0.0:
+            return step
+        z = math.copysign(1.0, m) if abs(m) > self.band else self.z
+        return step + (1.0 - abs(step)) * z * math.exp(-((x["dq"] / self.v_th) ** 2))
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        m = self._m(x)
+        if abs(m) > self.band:
+            self.z = math.copysign(1.0, m)
+
+
 class _LagOnline:
     """``y += a (x - y)`` on a signal of the sample; subclasses say what x is and what is returned."""
 
@@ -328,6 +366,7 @@ class _DelayOnline:
 
 _V_EPS = (0.0, 0.005, 0.01, 0.02, 0.05)  # [rad/s] sign smoothing
 _V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
+_REST = (0.0, 0.01, 0.05)  # [rad/s] dead zone: resting below this speed at the last edge (0: no latch)
 _LAGS = (0.0, 0.002, 0.005)  # [s] delay of the inertia term (that of the torque estimate)
 
 BUILTIN = (
@@ -356,11 +395,13 @@ BUILTIN = (
     ),
     Effect(
         "deadzone", deadzone,
-        tuple({"band": b, "damping_share": d} for d in (0.0, 0.33, 0.67) for b in (3e-5, 1e-4, 3e-4, 1e-3)),
+        tuple({"band": b, "damping_share": d, "v_th": v}
+              for d in (0.0, 0.33, 0.67) for b in (3e-5, 1e-4, 3e-4, 1e-3) for v in _REST),
         ("tau", "dq", "u", "u_v"),
-        "residual against the linear prediction u: a step at u = 0 (the servo needs a minimum error)",
+        "residual against the linear prediction u: a step at u = 0 (the servo needs a minimum error); at rest with "
+        "no effort, the sign of the last effort (the joint stays at the edge of the dead band it was pushed to)",
         "servo_error", "dead zone of the servo (on the position error or the current)", _torque_reversal_at_rest,
-        confusable=("backlash", "coulomb"),
+        online=_DeadzoneOnline, confusable=("backlash", "coulomb"),
     ),
     Effect(
         "direction_gain", direction_gain, tuple({"v_eps": v} for v in _V_EPS[1:]), ("tau", "dq", "u"),
@@ -483,7 +524,6 @@ SCALAR = {
     "coulomb": lambda x, v_eps: _ssign(x["dq"], v_eps),
     "coulomb_asym": lambda x, v_eps: abs(_ssign(x["dq"], v_eps)),
     "stribeck": lambda x, v_s, v_eps: _ssign(x["dq"], v_eps) * math.exp(-((x["dq"] / v_s) ** 2)),
-    "deadzone": lambda x, band, damping_share=0.0: min(1.0, max(-1.0, (x["u"] - damping_share * x["u_v"]) / band)),
     "direction_gain": lambda x, v_eps: _ssign(x["dq"], v_eps) * x["u"],
     "load_friction": lambda x, v_eps: abs(x["tau"]) * _ssign(x["dq"], v_eps),
     "cogging": lambda x, period, phase=0.0: math.sin(2.0 * math.pi * x["q"] / period + phase),

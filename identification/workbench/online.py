@@ -51,7 +51,7 @@ ONLINE_SIGNALS = {
     "coulomb_asym": "dq",
     "stribeck": "dq",
     "stiction": "dq (history: a latch of the last direction)",
-    "deadzone": "tau, dq",
+    "deadzone": "tau, dq (history if v_th > 0: a latch of the sign of the last effort beyond the band)",
     "direction_gain": "tau, dq",
     "load_friction": "tau, dq",
     "backlash": "tau, ddq (the estimator's acceleration; history: the last `lag` seconds of it)",
