@@ -51,9 +51,9 @@ class ZenohBackend(Backend):
 
     Frames reach the control thread without a Python thread in between: zenoh's network thread
     queues them in a ring channel and :meth:`read` takes them out (one GIL hand-over per frame
-    instead of two through a callback thread; lock-step round trip p50 -10 to -40 %, see
-    bench/zenoh_pingpong.py). Whatever must interrupt a blocked read (robot lost, close, the read
-    timeout) puts an empty wake-up sample on the frame key, delivered to this session only.
+    instead of two through a callback thread; measurements in docs/protocol.md). Whatever must
+    interrupt a blocked read (robot lost, close, the read timeout) puts an empty wake-up sample on
+    the frame key, delivered to this session only.
 
     Args:
         robot: robot name in the key expressions (``servotau/v1/<robot>/...``).
