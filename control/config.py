@@ -250,7 +250,7 @@ class ControlConfig:
             raise root.error("torque_joints", torque_joints, "distinct joint names")
 
         defaults = root.section("defaults", {})
-        gain_keys = ["k_p", "k_i", "integral_limit", "k6", "k_s", "k7", "k_d"]
+        gain_keys = ["k_p", "k_i", "integral_limit", "k6", "k_s", "k7", "k_d", "k7_scaling"]
         defaults.check_keys(gain_keys)
         joints = root.section("joints", {})
         for j in joints.keys():
@@ -326,8 +326,15 @@ def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: flo
                                   f"shape parameters of effect '{name}'") from err
 
 
+K7_SCALINGS = ("constant", "inverse_sqrt_k6")
+"""``k7_scaling``: ``constant`` uses k7 (k_d) as given; ``inverse_sqrt_k6`` divides it by sqrt(K6), so the given
+k7 is the value at K6 = 1 and lower stiffnesses get more velocity feedback (docs/control.md: the measured
+stability window of k7 moves up as K6 falls)."""
+
+
 def _joint_gains(own: Section, defaults: Section, k_tau: float) -> JointGains:
-    """Gains of one joint: its own table first, then [defaults]; k6/k7 are converted to k_s/k_d."""
+    """Gains of one joint: its own table first, then [defaults]; k6/k7 are converted to k_s/k_d, and k_d is
+    divided by sqrt(K6) with ``k7_scaling = "inverse_sqrt_k6"``."""
 
     def pick(key: str) -> Section | None:
         return own if key in own else defaults if key in defaults else None
@@ -352,10 +359,21 @@ def _joint_gains(own: Section, defaults: Section, k_tau: float) -> JointGains:
         return 0.0
 
     unit_native = {"k6": "-, 1 = the native servo", "k7": "s"}
+    k_s = stiffness("k6", "k_s", "N m/rad", ks_from_k6)
+    k_d = stiffness("k7", "k_d", "N m s/rad", kd_from_k7)
+    sec = pick("k7_scaling")
+    scaling = "constant" if sec is None else sec.data["k7_scaling"]
+    if scaling not in K7_SCALINGS:
+        raise sec.error("k7_scaling", scaling, f"one of {list(K7_SCALINGS)}")
+    if scaling == "inverse_sqrt_k6":
+        k6 = k_tau * (1.0 + k_p) * k_s
+        if not k6 > 0:
+            raise sec.error("k7_scaling", scaling, "'constant' for a joint without position gain (k6 = 0)")
+        k_d /= math.sqrt(k6)
     return JointGains(
         k_p=k_p,
-        k_s=stiffness("k6", "k_s", "N m/rad", ks_from_k6),
-        k_d=stiffness("k7", "k_d", "N m s/rad", kd_from_k7),
+        k_s=k_s,
+        k_d=k_d,
         k_i=value("k_i", 0.0, "1/s"),
         integral_limit=value("integral_limit", 10.0, "N m"),
     )

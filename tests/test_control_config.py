@@ -55,6 +55,23 @@ def test_joint_table_overrides_defaults_in_either_unit():
     assert cfg.gains["RLEG_JOINT2"].k_s == pytest.approx(0.5 / (K_TAU["RLEG_JOINT2"] * 3.0))
 
 
+def test_k7_scaling_divides_the_velocity_gain_by_sqrt_k6():
+    """k7_scaling = "inverse_sqrt_k6": K7 = k7 / sqrt(K6) per joint (the given k7 is the value at K6 = 1);
+    "constant" keeps k7; a joint table overrides [defaults]."""
+    data = _with("defaults.k6", 0.25)
+    data["defaults"].update({"k7": 0.001, "k7_scaling": "inverse_sqrt_k6"})
+    data["joints"] = {"RLEG_JOINT2": {"k7_scaling": "constant"}}
+    cfg = ControlConfig.from_mapping(data, INFO)
+
+    def k7(joint):
+        g = cfg.gains[joint]
+        return K_TAU[joint] * (1.0 + g.k_p) * g.k_d
+
+    assert k7("RLEG_JOINT3") == pytest.approx(0.002)
+    assert k7("RLEG_JOINT2") == pytest.approx(0.001)
+    assert BASE["defaults"]["k7_scaling"] == "inverse_sqrt_k6"  # the shipped rule; K6 = 1 keeps k7 itself
+
+
 @pytest.mark.parametrize("path, value, field, expected", [
     ("defaults.k_p", -2.0, "defaults.k_p", ">= 0"),
     ("defaults.k6", math.nan, "defaults.k6", "finite"),
@@ -69,6 +86,8 @@ def test_joint_table_overrides_defaults_in_either_unit():
     ("sign_velocity", 0.0, "sign_velocity", "> 0"),
     ("fade_time", -1.0, "fade_time", ">= 0"),
     ("velocity_feedforward", "measured", "velocity_feedforward", "'estimate', 'reference'"),
+    ("defaults.k7_scaling", "inverse_k6", "defaults.k7_scaling", "'constant', 'inverse_sqrt_k6'"),
+    ("joints", {"RLEG_JOINT3": {"k6": 0.0}}, "k7_scaling", "'constant' for a joint without position gain"),
     ("contacts", ["left_knee"], "contacts", "F/T sensors"),
     ("safety.max_torque", -5.0, "safety.max_torque", "> 0"),
     ("safety.max_velocity", math.inf, "safety.max_velocity", "finite"),
