@@ -401,10 +401,11 @@ def force_profile(t: float, f0: np.ndarray) -> np.ndarray:
     return np.array([0.0, 0.0, f0[2] + FORCE_AMPLITUDE * np.sin(2 * np.pi * FORCE_FREQUENCY * t)])
 
 
-def force_run(quick: bool, out: Path, rerun: bool = False, posture: str = "compatible") -> Run:
+def force_run(quick: bool, out: Path, rerun: bool = False, posture: str = "compatible",
+              motors: str | None = None) -> Run:
     duration = 2.0 / FORCE_FREQUENCY if quick else FORCE_DURATION
     return simulate("force", scenario="force", mode="torque", k6=FORCE_K6, swing=None, force_profile=force_profile,
-                    duration=duration, rerun=_rerun_target(out, rerun, "force"), posture=posture)
+                    duration=duration, rerun=_rerun_target(out, rerun, "force"), posture=posture, motors=motors)
 
 
 def force_metrics(run: Run, key: str = "f_hat") -> dict:
@@ -456,6 +457,10 @@ def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | No
         other_tripped = other.tripped
         metrics[f"measured, {other_name} posture"] = _force_run_metrics(other)["measured"]
         columns[f"measured, reference = {other_name} posture"] = metrics[f"measured, {other_name} posture"]
+        dead = force_run(quick, out, False, posture, motors=DEADBAND_MODEL)
+        other_tripped = {k: v for k, v in ((other_name, other_tripped), ("dead band", dead.tripped)) if v} or None
+        metrics["measured, dead band model"] = _force_run_metrics(dead)["measured"]
+        columns["measured, dead band model"] = metrics["measured, dead band model"]
     rows = [[k] + [m[k] if m else float("nan") for m in columns.values()]
             for k in ("overshoot_pct", "coupling_x_pct", "coupling_y_pct", "delay_ms", "amplitude_ratio",
                       "rms_error_z_N")]
@@ -681,13 +686,14 @@ def write_results(out: Path, doc: Path) -> str:
                   "frame)." + (" QUICK run (2 periods)." if force["quick"] else ""), ""]
         parts += [force["table"], ""]
         if force.get("compared_posture"):
-            parts += [f"Last column: the same run with the reference joint angles = "
+            parts += [f"Third column: the same run with the reference joint angles = "
                       f"{force['compared_posture']} posture, for comparison"
-                      + (f" (safety trip: {force['compared_tripped']})" if force.get("compared_tripped") else "")
+                      + (f" (safety trips: {force['compared_tripped']})" if force.get("compared_tripped") else "")
                       + ". With the start posture the position feedback cancels part of the commanded force: in "
                       "steady state (1 + K_f) J^T (f_hat - f_d) = -K_s e_q, and pressing moves the leg (the body "
                       "rises on the position-servoed left leg, the contacts deflect: about 3 mrad of knee per 22 N, "
-                      "measured with the paper's motor model).",
+                      "measured with the paper's motor model). Last column: the motor model with the servo's dead band "
+                      f"measured on the holds (`config/{DEADBAND_MODEL}`), as the motion runs marked 'dead band'.",
                       ""]
         if force["tripped"]:
             parts += [f"Safety trip: {force['tripped']}", ""]
