@@ -106,3 +106,58 @@ def test_torque_alignment_finds_an_estimator_delay():
     ds2, shift2 = align_torque(load_dataset(static, smooth_torque_s=0.0))
     assert shift2 == pytest.approx(0.008)
     assert any("advanced by 8 ms" in n for n in ds2.notes)
+
+
+def test_servotau_log_with_only_the_ground_truth_torque_is_an_error_not_a_silent_fallback():
+    """The simulator's true/tau is taken only when mapped explicitly: a real robot has none."""
+    c = synthetic_table(seconds=2.0)
+    log = {"t": c["t"], "q/J": c["q"], "q_des/J": c["q_des"], "true/tau/J": c["tau"]}
+    with pytest.raises(IdentificationError, match="no torque column: expected 'est/tau/J'"):
+        load_dataset(log)
+    assert load_dataset(log, roles={"torque": "true/tau/J"}).roles["torque"] == "true/tau/J"
+
+
+@pytest.fixture(scope="module")
+def collected_log(tmp_path_factory):
+    """A 7 s simulated identification collection of the knee (sensors and ground truth, no estimate)."""
+    from servotau.hal.factory import open_backend
+    from servotau.identification.app import hal_for_collection
+    from servotau.identification.collect import HoldPlan, SweepPlan
+    from servotau.identification.operator_script import write_sim_setup
+    from servotau.identification.plan import CollectionPlan, load_plan
+    from servotau.identification.session import run_collection
+
+    folder = tmp_path_factory.mktemp("wb_ident")
+    base, _ = load_plan()
+    plan = CollectionPlan(sweeps=(SweepPlan("RLEG_JOINT3", a=0.1, duration=3.0),),
+                          holds=HoldPlan(base.holds.configurations[:1], move=1.0, hold=1.0), settle=1.0,
+                          holds_start=5.0)
+    section, name = hal_for_collection("hal.toml", "inprocess", str(write_sim_setup(plan, folder)))
+    log = folder / "log.parquet"
+    with open_backend(section, backend=name) as backend:
+        run_collection(backend, plan, log, source=name, progress=lambda _m: None)
+    return log
+
+
+def test_collected_log_gets_the_off_line_estimate_and_never_reads_the_ground_truth(collected_log, tmp_path):
+    """A servotau Parquet log without est/tau: the estimated torque, unchanged when the true/ columns are scrambled."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from servotau.identification.workbench.data import read_table
+
+    assert not any(c.startswith("est/") for c in read_table(collected_log))
+    ds = load_dataset(collected_log, joint="RLEG_JOINT3")
+    assert ds.roles["torque"] == "est/tau/RLEG_JOINT3" and ds.roles["velocity"] == "est/dq/RLEG_JOINT3"
+    assert any("not the simulator's ground truth" in n for n in ds.notes)
+    table = pq.read_table(collected_log)
+    for i, name in enumerate(table.column_names):
+        if name.startswith("true/"):
+            table = table.set_column(i, name, pa.array(table.column(name).to_numpy() * -3.0 + 1.0))
+    scrambled = tmp_path / "scrambled.parquet"
+    pq.write_table(table, scrambled)
+    again = load_dataset(scrambled, joint="RLEG_JOINT3")
+    np.testing.assert_array_equal(again.signals["tau"], ds.signals["tau"])
+    np.testing.assert_array_equal(again.target, ds.target)
+    true_tau = ds.signals["true/tau/RLEG_JOINT3"]  # evaluation only: the estimate is close to the truth
+    assert np.sqrt(np.mean((ds.signals["tau"] - true_tau) ** 2)) < 0.2 * np.sqrt(np.mean(true_tau**2))

@@ -8,8 +8,13 @@ Three layouts are recognised, in this order:
    ``velocity``, ``position``, ``time``, ``segment`` (held-out blocks of the cross-validation),
    ``acceleration``.
 2. servotau's own logs (one row per tick): ``t``, ``q/<joint>``, ``q_des/<joint>``,
-   ``est/tau/<joint>`` (else ``true/tau/<joint>``), optional ``est/dq/<joint>``; pick the joint with
-   ``joint`` (optional when the log has one joint).
+   ``est/tau/<joint>``, optional ``est/dq/<joint>``; pick the joint with ``joint`` (optional when the
+   log has one joint). A Parquet log without ``est/tau/<joint>`` (``servotau identify collect`` writes
+   the sensors, not estimates) gets the off-line estimator's torque and velocity, as
+   ``servotau identify fit`` does (identification/pipeline.py: centred filters, F/T calibration, RNEA,
+   the torque aligned with the command it answers). The simulator's ground truth (``true/*``) is never
+   taken on its own: map it explicitly (``roles={"torque": "true/tau/<joint>"}``) to study the model
+   without estimation error.
 3. A single-joint table: ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], optional ``dq``
    [rad/s] and ``segment``.
 
@@ -159,7 +164,7 @@ def resolve_roles(columns: Mapping[str, np.ndarray], joint: str | None, roles: M
         if joint not in joints:
             raise IdentificationError(f"joint '{joint}': not in the log: expected one of {joints}")
         found = {"position": f"q/{joint}", "command": f"q_des/{joint}"}
-        for role, candidates in (("torque", (f"est/tau/{joint}", f"true/tau/{joint}", f"tau/{joint}")),
+        for role, candidates in (("torque", (f"est/tau/{joint}", f"tau/{joint}")),
                                  ("velocity", (f"est/dq/{joint}", f"dq/{joint}"))):
             col = next((c for c in candidates if c in columns), None)
             if col is not None:
@@ -168,8 +173,9 @@ def resolve_roles(columns: Mapping[str, np.ndarray], joint: str | None, roles: M
             found["time"] = "t"
         if "torque" not in found and "torque" not in roles:
             raise IdentificationError(
-                f"joint '{joint}': no torque column: expected 'est/tau/{joint}' or 'true/tau/{joint}' "
-                "(or map one with torque=COLUMN)"
+                f"joint '{joint}': no torque column: expected 'est/tau/{joint}' (a controller's log), a servotau "
+                "Parquet log with its sensors (the off-line estimator then computes it), or a mapping "
+                "torque=COLUMN"
             )
         return {**found, **roles}, joint
     if not roles or not ({"target", "command"} & set(roles)):
@@ -219,13 +225,16 @@ def load_dataset(
     if isinstance(source, (str, Path)):
         columns = read_table(source)
         name = str(source)
+        columns, estimated = _with_estimates(Path(source), columns, joint, roles)
     else:
+        estimated = None
         columns = table_columns(source)
         name = "table"
     if not columns:
         raise IdentificationError(f"{name}: no numeric column: expected a table of samples")
     roles, joint = resolve_roles(columns, joint, roles)
     used = {role: columns[col] for role, col in roles.items()}
+    notes = [estimated] if estimated else []
     n_total = len(next(iter(columns.values())))
     valid = np.ones(n_total, dtype=bool)
     for role, arr in used.items():
@@ -234,7 +243,6 @@ def load_dataset(
             raise IdentificationError(f"column '{roles[role]}' (role {role}): all {n_total} values are NaN or inf")
         valid &= ~bad
     n_dropped = int(n_total - valid.sum())
-    notes = []
     if n_dropped:
         notes.append(f"dropped {n_dropped} of {n_total} rows with NaN or inf in "
                      f"{sorted(roles[r] for r, a in used.items() if not np.isfinite(a).all())}")
@@ -287,6 +295,27 @@ def load_dataset(
     n = int(valid.sum())
     segment = used["segment"][valid] if "segment" in roles else None
     return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes))
+
+
+def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | None,
+                    roles: Mapping[str, str] | None) -> tuple[dict[str, np.ndarray], str | None]:
+    """``columns`` plus ``est/tau/<joint>`` and ``est/dq/<joint>`` from the off-line estimator, for a
+    servotau Parquet log that has sensors but no estimate of the joint (module doc, layout 2); and a
+    note saying so (None when nothing was added)."""
+    joints = servotau_joints(columns)
+    if not joints or {"target", "command", "torque"} & set(roles or {}) or "imu/gyro_x" not in columns:
+        return columns, None
+    if joint is None and len(joints) == 1:
+        joint = joints[0]
+    if joint not in joints or f"est/tau/{joint}" in columns:
+        return columns, None  # resolve_roles says what is wrong, or the log has its estimate
+    from servotau.identification.pipeline import load_aligned
+
+    log.info("%s: no est/tau/%s: estimating it off-line from the sensors", path, joint)
+    s = load_aligned(path, [joint]).samples[joint]
+    note = (f"est/tau/{joint}, est/dq/{joint}: off-line estimates from the log's sensors (identification/"
+            "pipeline.py, as `servotau identify fit`), not the simulator's ground truth")
+    return {**columns, f"est/tau/{joint}": s.tau, f"est/dq/{joint}": s.dq}, note
 
 
 def _window(seconds: float, dt: float) -> int:
