@@ -41,6 +41,7 @@ def test_add_prints_the_ladder_and_saves_the_motor_model(capsys, cogging_log, tm
     assert ladder[1]["heldout_rms"] < 0.2 * ladder[0]["heldout_rms"] and all("model" in r for r in ladder)
     m = MotorParameters.load_toml(path)["joint"]
     assert "cogging" in m.extra and m.extra["cogging"].shape["period"] == pytest.approx(0.08)
+    assert m.provenance.endswith("; tau: tau") and out["rejected"] == []  # the table's own torque column
 
 
 def test_add_named_effect_with_the_asymmetric_loss(capsys, cogging_log):

@@ -131,3 +131,26 @@ def test_registering_bad_effects_is_refused():
         Effect("g", lambda s, a: s["tau"], grid=[{"a": "x"}])
     with pytest.raises(IdentificationError, match="unknown effect 'nope': expected one of"):
         get_effect("nope")
+
+
+def test_greedy_step_that_raises_the_held_out_error_is_rejected_and_stops(monkeypatch):
+    """A diagnosis that names an effect the data lacks (motor_lag on 6 s of the linear model with 1 mrad of
+    noise): its refit raises the held-out error, so the ladder keeps the rung it started from, lists the
+    step as rejected, and stops."""
+    from types import SimpleNamespace
+
+    from servotau.identification.workbench import ladder as ladder_module
+
+    ds = load_dataset(synthetic_table(noise=1e-3, seconds=6.0))
+    calls = []
+
+    def claims_motor_lag(*_args, **_kwargs):
+        calls.append(1)
+        return SimpleNamespace(verdict="missing_effect", top=SimpleNamespace(effect="motor_lag", heldout_gain=0.5))
+
+    monkeypatch.setattr(ladder_module, "diagnose", claims_motor_lag)
+    lad = add_effects(ds, ModelSpec(("k_tau", "k_v"), (Term("coulomb", {"v_eps": 0.0}),)), max_steps=3)
+    assert len(calls) == 1  # stopped after the rejected step
+    assert [r.added for r in lad.rungs] == [None] and [r.added for r in lad.rejected] == ["motor_lag"]
+    assert lad.rejected[0].comparison.heldout.error > lad.rungs[0].comparison.heldout.error
+    assert lad.final is lad.rungs[0].comparison.model and lad.to_dict()["rejected"][0]["added"] == "motor_lag"

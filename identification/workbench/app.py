@@ -190,7 +190,11 @@ def run(args: argparse.Namespace) -> int:
         out.update(ladder.to_dict())
         if args.save:
             joint = ds.joint or "joint"
-            path = save_model(ladder, args.save, joint, provenance=f"{ds.source}; servotau model add; {loss}")
+            tau = ds.roles.get("torque", "no torque")
+            if any("off-line estimates" in note for note in ds.notes):
+                tau += " (off-line estimate from the log's sensors)"
+            path = save_model(ladder, args.save, joint,
+                              provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}")
             out["saved"] = {"file": str(path), "joint": joint}
             say(f"saved {ladder.final.spec.label()} to {path} [{joint}]")
     if args.report:

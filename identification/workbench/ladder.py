@@ -2,7 +2,9 @@
 
 Greedy mode (no effect named): diagnose the current model, add the top effect if the verdict is
 ``missing_effect``, refit everything with the same loss, diagnose again, until nothing is missing or
-``max_steps`` effects were added. Named mode: add the given effects in order, then diagnose the result.
+``max_steps`` effects were added. A step whose refit does not lower the held-out error (the diagnosis
+ranks an effect with the other shapes held; refitting them all can overfit) is not kept: it is listed
+in :attr:`Ladder.rejected` and the search stops. Named mode: add the given effects in order, then diagnose the result.
 On every rung, the shapes the caller did not fix are chosen again jointly (coordinate descent over the
 grids, ``SWEEPS`` passes): an effect that was missing bends the shapes of the others.
 """
@@ -59,11 +61,13 @@ class Ladder:
         diagnoses: ``diagnoses[i]`` ranked the effects missing from ``rungs[i]`` (the last one gives the
             final verdict; named mode has only the last).
         loss: Loss of every fit.
+        rejected: Greedy steps tried and not kept (their refit raised the held-out error).
     """
 
     rungs: tuple[Rung, ...]
     diagnoses: tuple[Diagnosis, ...]
     loss: Loss
+    rejected: tuple[Rung, ...] = ()  # greedy steps whose refit did not lower the held-out error
 
     @property
     def final(self) -> FittedModel:
@@ -83,6 +87,7 @@ class Ladder:
         return {
             "verdict": self.verdict,
             "ladder": [r.to_dict() for r in self.rungs],
+            "rejected": [r.to_dict() for r in self.rejected],
             "heldout_fall": _r(self.fall()),
             "loss": str(self.loss),
         }
@@ -142,6 +147,7 @@ def add_effects(
             diagnoses.append(diagnose(ds, spec, loss, effects=_remaining(candidates, spec), folds=folds,
                                       min_gain=min_gain, cache=cache, progress=progress))
         return Ladder(tuple(rungs), tuple(diagnoses), loss)
+    rejected: list[Rung] = []
     for step in range(max_steps + 1):
         say(f"step {step}: diagnosing {spec.label()}")
         d = diagnose(ds, spec, loss, effects=_remaining(candidates, spec), folds=folds, min_gain=min_gain,
@@ -151,8 +157,15 @@ def add_effects(
             break
         top = d.top
         say(f"adding {top.effect} ({100 * top.heldout_gain:.0f} % of the held-out error); refitting the shapes")
+        kept_spec, kept_free = spec, free
         climb(top.effect)
-    return Ladder(tuple(rungs), tuple(diagnoses), loss)
+        before, after = rungs[-2].comparison.heldout, rungs[-1].comparison.heldout
+        if before is not None and after is not None and after.error >= before.error:
+            rejected.append(rungs.pop())
+            spec, free = kept_spec, kept_free
+            say(f"{top.effect} not kept: refitted, the held-out RMS went {before.rms:.3g} -> {after.rms:.3g}; stopping")
+            break
+    return Ladder(tuple(rungs), tuple(diagnoses), loss, tuple(rejected))
 
 
 def _remaining(candidates: Iterable[str] | None, spec: ModelSpec) -> list[str] | None:
