@@ -362,9 +362,7 @@ def _joint_gains(own: Section, defaults: Section, k_tau: float) -> JointGains:
     k_s = stiffness("k6", "k_s", "N m/rad", ks_from_k6)
     k_d = stiffness("k7", "k_d", "N m s/rad", kd_from_k7)
     sec = pick("k7_scaling")
-    scaling = "constant" if sec is None else sec.data["k7_scaling"]
-    if scaling not in K7_SCALINGS:
-        raise sec.error("k7_scaling", scaling, f"one of {list(K7_SCALINGS)}")
+    scaling = "constant" if sec is None else sec.str("k7_scaling", choices=K7_SCALINGS)
     if scaling == "inverse_sqrt_k6":
         k6 = k_tau * (1.0 + k_p) * k_s
         if not k6 > 0:
