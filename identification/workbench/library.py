@@ -175,22 +175,7 @@ def acceleration(s: Signals, window: float) -> np.ndarray:
     w = max(5, int(round(window / dt)) | 1)
     if w > s.n:
         return s["ddq"]
-    q = s["q"]
-    key = (id(q), w, dt)
-    hit = _ACC_CACHE.get(key)
-    if hit is not None and hit[0] is q:
-        return hit[1]
-    a = savgol_centred(q, w, 3, dt, deriv=2)
-    a.setflags(write=False)  # shared between calls
-    if len(_ACC_CACHE) >= 16:
-        _ACC_CACHE.pop(next(iter(_ACC_CACHE)))
-    _ACC_CACHE[key] = (q, a)
-    return a
-
-
-_ACC_CACHE: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray]] = {}
-"""SG accelerations by (identity of ``q``, window, dt): every fit of the diagnosis filters the same ``q``
-with the same few windows. An entry keeps its ``q`` alive, so an identity match is the same array."""
+    return s.derived("q", ("ddq", w, dt), lambda q: savgol_centred(q, w, 3, dt, deriv=2))
 
 
 def inertia(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:

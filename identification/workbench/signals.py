@@ -29,6 +29,8 @@ class Signals(Mapping[str, np.ndarray]):
     """Named 1-D signals of equal length, sampled every ``dt`` seconds (None if unknown).
 
     Entries can be given lazily as zero-argument callables; they are computed on first access.
+    Filtered versions of a signal (:meth:`derived`) are computed once for this object and the copies
+    :meth:`with_columns` makes of it, as long as they hold the same array.
     """
 
     def __init__(
@@ -36,10 +38,13 @@ class Signals(Mapping[str, np.ndarray]):
         columns: Mapping[str, np.ndarray | Callable[[], np.ndarray]],
         dt: float | None,
         n: int,
+        *,
+        memo: dict | None = None,
     ):
         self._cols = dict(columns)
         self.dt = dt
         self.n = int(n)
+        self._memo = {} if memo is None else memo  # (source, key) -> (source array, derived array)
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name not in self._cols:
@@ -61,7 +66,20 @@ class Signals(Mapping[str, np.ndarray]):
 
     def with_columns(self, **columns: np.ndarray | Callable[[], np.ndarray]) -> Signals:
         """A copy with ``columns`` added or replaced (e.g. ``u`` of another model)."""
-        return Signals({**self._cols, **columns}, self.dt, self.n)
+        return Signals({**self._cols, **columns}, self.dt, self.n, memo=self._memo)
+
+    def derived(self, source: str, key: tuple, compute: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """``compute(self[source])`` (read-only), computed once per ``key`` (what the computation is, e.g.
+        ``("ddq", window)``) while ``source`` is the same array, here and in the copies of :meth:`with_columns`:
+        a diagnosis filters the same ``q`` with the same few windows in every fit."""
+        x = self[source]
+        hit = self._memo.get((source, key))
+        if hit is not None and hit[0] is x:
+            return hit[1]
+        y = compute(x)
+        y.setflags(write=False)
+        self._memo[(source, key)] = (x, y)
+        return y
 
     def require_dt(self, what: str) -> float:
         """The sampling period [s], or raise naming ``what`` needs it."""
