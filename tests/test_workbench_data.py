@@ -161,3 +161,20 @@ def test_collected_log_gets_the_off_line_estimate_and_never_reads_the_ground_tru
     np.testing.assert_array_equal(again.target, ds.target)
     true_tau = ds.signals["true/tau/RLEG_JOINT3"]  # evaluation only: the estimate is close to the truth
     assert np.sqrt(np.mean((ds.signals["tau"] - true_tau) ** 2)) < 0.2 * np.sqrt(np.mean(true_tau**2))
+
+
+def test_a_model_saved_from_an_estimated_log_says_so_in_its_provenance(collected_log, tmp_path, capsys):
+    """`model add --save` on a log without est/tau: the motor file's provenance names the estimated column."""
+    import json
+
+    from servotau.cli import main
+    from servotau.identification import MotorParameters
+
+    path = tmp_path / "motors.toml"
+    code = main(["model", "add", str(collected_log), "--joint", "RLEG_JOINT3", "--effect", "coulomb", "--json",
+                 "--quiet", "--save", str(path)])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert json.loads(out)["saved"]["joint"] == "RLEG_JOINT3"
+    provenance = MotorParameters.load_toml(path)["RLEG_JOINT3"].provenance
+    assert provenance.endswith("; tau: est/tau/RLEG_JOINT3 (off-line estimates from the log's sensors)"), provenance

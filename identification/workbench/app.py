@@ -25,7 +25,7 @@ from servotau.errors import IdentificationError
 
 from ..loss import Loss
 from . import library as _library  # noqa: F401  (registers the built-in effects)
-from .data import ROLES, align_torque, describe, load_dataset
+from .data import OFFLINE_ESTIMATE, ROLES, align_torque, describe, load_dataset
 from .diagnose import MIN_GAIN, diagnose
 from .effects import effect_names
 from .evaluate import DEFAULT_FOLDS, compare, folds_of
@@ -191,8 +191,8 @@ def run(args: argparse.Namespace) -> int:
         if args.save:
             joint = ds.joint or "joint"
             tau = ds.roles.get("torque", "no torque")
-            if any("off-line estimates" in note for note in ds.notes):
-                tau += " (off-line estimate from the log's sensors)"
+            if any(OFFLINE_ESTIMATE in note for note in ds.notes):
+                tau += f" ({OFFLINE_ESTIMATE})"
             path = save_model(ladder, args.save, joint,
                               provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}")
             out["saved"] = {"file": str(path), "joint": joint}

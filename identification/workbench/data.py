@@ -43,6 +43,7 @@ ROLES = ("target", "command", "position", "torque", "velocity", "acceleration", 
 SG_WINDOW_S = 0.041  # [s] centred SG window of the velocity (41 samples at 1 kHz)
 SG_WINDOW_DDQ_S = 0.081  # [s] centred SG window of the acceleration
 SMOOTH_TAU_S = 0.021  # [s] centred SG smoothing of the torque (21 samples at 1 kHz)
+OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
 _SIGNAL_OF_ROLE = {"position": "q", "command": "q_des", "torque": "tau", "velocity": "dq", "acceleration": "ddq",
                    "time": "t"}
@@ -313,8 +314,8 @@ def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | Non
 
     log.info("%s: no est/tau/%s: estimating it off-line from the sensors", path, joint)
     s = load_aligned(path, [joint]).samples[joint]
-    note = (f"est/tau/{joint}, est/dq/{joint}: off-line estimates from the log's sensors (identification/"
-            "pipeline.py, as `servotau identify fit`), not the simulator's ground truth")
+    note = (f"est/tau/{joint}, est/dq/{joint}: {OFFLINE_ESTIMATE} (identification/pipeline.py, as "
+            "`servotau identify fit`), not the simulator's ground truth")
     return {**columns, f"est/tau/{joint}": s.tau, f"est/dq/{joint}": s.dq}, note
 
 
