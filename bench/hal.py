@@ -25,7 +25,10 @@ truth: a pure controller).
   ``rtt_*_ratio_to_baseline``: what the HAL adds, as a ratio that a shared machine's load changes
   less than the absolute figures. ``baseline_threads_*``: the same ping-pong through Python
   callback threads (the HAL's pattern before); ``threads_to_channel_*_ratio``: what the channel
-  pattern saves.
+  pattern saves. ``baseline_zenoh_default_pools_*``: the channel ping-pong with zenoh's default
+  runtime pools (``ZENOH_RUNTIME="()"``) instead of the HAL's layout; ``*_cpu_us_per_rt``: the
+  robot process's CPU time per round trip; ``default_pools_to_hal_layout_cpu_ratio``: what the
+  layout saves.
 
 Wall-clock figures depend on the machine's load: ``cpu_count`` and ``loadavg_1min`` are reported.
 """
@@ -122,12 +125,15 @@ def bench_realtime(robot: str, scenario: str | None, duration: float, priority: 
             f"realtime_holds{sfx}": st["holds"]}
 
 
-def bench_baseline(ticks: int, pattern: str = "channel") -> dict:
-    """Bare Zenoh ping-pong (bench/zenoh_pingpong.py), the floor under ``rtt_*``, in this run."""
+def bench_baseline(ticks: int, pattern: str = "channel", zenoh_runtime: str | None = None,
+                   prefix: str | None = None) -> dict:
+    """Bare Zenoh ping-pong (bench/zenoh_pingpong.py), the floor under ``rtt_*``, in this run;
+    ``zenoh_runtime``: the ZENOH_RUNTIME of both processes (None: the HAL's layout)."""
     port, script = free_port(), str(Path(__file__).with_name("zenoh_pingpong.py"))
+    env = dict(os.environ, **({"ZENOH_RUNTIME": zenoh_runtime} if zenoh_runtime is not None else {}))
     robot = subprocess.Popen([sys.executable, script, "robot", str(port), str(ticks), pattern], stdout=subprocess.PIPE,
-                             text=True)
-    ctl = subprocess.Popen([sys.executable, script, "controller", str(port), str(ticks), pattern])
+                             text=True, env=env)
+    ctl = subprocess.Popen([sys.executable, script, "controller", str(port), str(ticks), pattern], env=env)
     try:
         out, _ = robot.communicate(timeout=180)
         ctl.wait(30)
@@ -135,8 +141,9 @@ def bench_baseline(ticks: int, pattern: str = "channel") -> dict:
         stop_process(robot)
         stop_process(ctl)
     r = json.loads(out)
-    prefix = "baseline" if pattern == "channel" else f"baseline_{pattern}"
-    return {f"{prefix}_rtt_p50_us": r["rtt_p50_us"], f"{prefix}_rtt_p99_us": r["rtt_p99_us"]}
+    prefix = prefix or ("baseline" if pattern == "channel" else f"baseline_{pattern}")
+    return {f"{prefix}_rtt_p50_us": r["rtt_p50_us"], f"{prefix}_rtt_p99_us": r["rtt_p99_us"],
+            f"{prefix}_cpu_us_per_rt": r["cpu_us_per_rt"]}
 
 
 def bench_codec() -> dict:
@@ -162,6 +169,7 @@ def main() -> int:
                          "without the permission they warn and run with ordinary scheduling)")
     args = ap.parse_args()
     out = {**bench_codec(), **bench_baseline(args.ticks), **bench_baseline(args.ticks, "threads"),
+           **bench_baseline(args.ticks, zenoh_runtime="()", prefix="baseline_zenoh_default_pools"),
            **bench_lockstep(args.robot, args.scenario, args.ticks),
            **bench_realtime(args.robot, args.scenario, args.duration),
            **(bench_lockstep(args.robot, args.scenario, args.ticks, args.fifo) if args.fifo else {}),
@@ -171,6 +179,9 @@ def main() -> int:
     out["rtt_p99_ratio_to_baseline"] = out["rtt_p99_us"] / out["baseline_rtt_p99_us"]
     for q in ("p50", "p99"):  # > 1: the HAL's channel pattern saves that much over a callback thread
         out[f"threads_to_channel_{q}_ratio"] = out[f"baseline_threads_rtt_{q}_us"] / out[f"baseline_rtt_{q}_us"]
+    # > 1: the HAL's zenoh runtime layout (hal/zenoh_session.py ZENOH_RUNTIME) saves that much robot-side CPU
+    out["default_pools_to_hal_layout_cpu_ratio"] = (out["baseline_zenoh_default_pools_cpu_us_per_rt"]
+                                                    / out["baseline_cpu_us_per_rt"])
     out = {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}
     print(json.dumps(out) if args.json else json.dumps(out, indent=2))
     return 0

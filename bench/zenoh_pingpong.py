@@ -12,9 +12,10 @@ callback). Two threading patterns:
   controller hands each ping to its main thread through a ``threading.Condition``.
 
 bench/hal.py reports the HAL's round trip as a ratio to ``channel``, measured in the same run, and
-``threads`` as a ratio to ``channel`` (what the channel pattern saves).
+``threads`` as a ratio to ``channel`` (what the channel pattern saves). The robot also reports its
+process's CPU time per round trip (all threads, zenoh's included).
 
-    python bench/zenoh_pingpong.py robot PORT N [channel|threads]   # prints {"rtt_p50_us": ..., "rtt_p99_us": ...}
+    python bench/zenoh_pingpong.py robot PORT N [channel|threads]   # prints {"rtt_p50_us": ..., "cpu_us_per_rt": ...}
     python bench/zenoh_pingpong.py controller PORT N [channel|threads]
 """
 
@@ -42,11 +43,14 @@ def _publisher(s: Session, key: str):
 def robot(port: int, n: int, pattern: str) -> dict:
     s = Session(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]))
     pub, ping = _publisher(s, "bench/ping"), bytes(FRAME_BYTES)
-    rtt, t_sent, done = [], [0.0], threading.Event()
+    rtt, t_sent, done, cpu = [], [0.0], threading.Event(), [0.0, 0.0]
 
     def on_pong(_sample) -> None:
         rtt.append(time.perf_counter() - t_sent[0])
+        if len(rtt) == WARMUP:
+            cpu[0] = time.process_time()
         if len(rtt) >= n + WARMUP:
+            cpu[1] = time.process_time()
             done.set()
             return
         t_sent[0] = time.perf_counter()
@@ -61,7 +65,8 @@ def robot(port: int, n: int, pattern: str) -> dict:
     done.wait(120)
     s.close()
     r = np.array(rtt[WARMUP:]) * 1e6
-    return {"rtt_p50_us": float(np.percentile(r, 50)), "rtt_p99_us": float(np.percentile(r, 99))}
+    return {"rtt_p50_us": float(np.percentile(r, 50)), "rtt_p99_us": float(np.percentile(r, 99)),
+            "cpu_us_per_rt": (cpu[1] - cpu[0]) / n * 1e6}
 
 
 def controller(port: int, n: int, pattern: str) -> None:

@@ -23,9 +23,10 @@ GIL_SWITCH_INTERVAL = 2e-4
 # Zenoh's runtime pools (tokio), read once per process when the first session opens. Zenoh's default
 # gives the receive, accept, network and application pools threads of their own; the HAL moves a
 # message per tick each way, and on a 2-core machine fewer threads mean fewer hand-overs: one
-# application worker that also receives, plus one sender. Bare ping-pong, 4 interleaved rounds under
-# SCHED_FIFO at load 5: CPU per round trip 15-30 % lower in all 4, p50 and p99 lower in 3 of 4.
-# The environment variable ZENOH_RUNTIME, if set, wins.
+# application worker that also receives, plus one sender. Bare ping-pong against zenoh's default pools
+# (bench/hal.py: baseline_zenoh_default_pools_*), 5 interleaved rounds at load 1.2: robot CPU per round
+# trip 106-129 vs 132-159 us and p50 188-211 vs 227-274 us (lower in 5 of 5); p99 not better (lower in 2
+# of 5). The environment variable ZENOH_RUNTIME, if set, wins.
 ZENOH_RUNTIME = ("(rx: (handover: app), net: (handover: app), acc: (handover: app), app: (worker_threads: 1), "
                  "tx: (worker_threads: 1))")
 
