@@ -29,8 +29,10 @@ FORMAT_VERSION = 1
 BASES = ("fixed", "floating")
 """``fixed``: base locked (the paper's hanging robot); ``floating``: base state from the estimator."""
 
-VELOCITY_FEEDFORWARDS = ("estimate", "reference")
-"""Velocity read by the motor-model feedforward (eq. 10): ``estimate`` dq_hat (the paper), ``reference`` dq_d."""
+VELOCITY_FEEDFORWARDS = ("estimate", "reference", "reference_signs")
+"""Velocity read by the motor-model feedforward (eq. 10): ``estimate`` dq_hat (the paper), ``reference`` dq_d,
+``reference_signs`` dq_hat in the viscous term ``K_v dq`` and dq_d in the terms that switch with the direction of
+motion (Coulomb ``k_c``, the extra effect terms)."""
 
 AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 """Wrench axes, in the order of HAL wrenches ``[fx, fy, fz, tx, ty, tz]``."""
@@ -142,7 +144,7 @@ class ControlConfig:
     force: ForceTask | None = None
     sign_velocity: float = 0.01  # [rad/s] Coulomb sign smoothing: k_c tanh(dq / sign_velocity)
     fade_time: float = 0.5  # [s] the bumpless-switch offset fades to zero over this time
-    velocity_feedforward: str = "estimate"  # velocity of the motor-model feedforward: dq_hat or dq_d
+    velocity_feedforward: str = "estimate"  # velocity of the motor-model feedforward (VELOCITY_FEEDFORWARDS)
     source: str = "<direct>"  # file the config came from
     _torque_mask: np.ndarray = field(default=None, repr=False, compare=False)
 

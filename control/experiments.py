@@ -37,10 +37,12 @@ OTHER_COMPONENTS = ("ff_extra", "fb_torque_residual", "fb_integral", "switch_off
 # (K6, k7 [s]) runs beside the sweep with a constant velocity gain (k7_scaling = "constant"): the config's k7 at
 # K6 = 1, i.e. the sweep before the velocity gain followed K6
 MOTION_EXTRA = ((0.25, 0.001),)
-DEADBAND_MODEL = "motors/hrp2_sim_deadband.toml"  # the config's model plus the dead band measured on the holds
-DEADBAND_K6 = K6_VALUES  # K6 of the runs with DEADBAND_MODEL beside the sweep
+WORKBENCH_MODEL = "motors/hrp2_sim_improved.toml"  # the workbench's model, without the dead band measured on holds
 PAPER_MODEL = "motors/hrp2_sim_identified.toml"  # the paper's motor model (k_tau, k_v), for comparison
-PAPER_MODEL_K6 = (1.0, 0.25)  # K6 of the runs with PAPER_MODEL beside the sweep
+# Runs beside the sweep, each one change from the config (label -> simulate() overrides), at VARIANT_K6
+VARIANTS = {"workbench model": {"motors": WORKBENCH_MODEL}, "paper model": {"motors": PAPER_MODEL},
+            "ff=estimate": {"velocity_feedforward": "estimate"}}
+VARIANT_K6 = (1.0, 0.25)
 SETTLE = 0.5  # [s] position mode, holding the start posture; F/T offsets calibrated here
 HOLD = 1.0  # [s] in the experiment's mode before the motion (the mode switch offset fades in 0.5 s)
 TAIL = 0.5  # [s] after the swing, still evaluated
@@ -52,6 +54,10 @@ FORCE_FREQUENCY = 0.5  # [Hz]
 FORCE_DURATION = 6.0  # [s] of sinusoid (3 periods)
 FORCE_K6 = 0.1
 FORCE_KF = 1.0
+# Regulated axes of the sole wrench. The paper (5.4) regulates the force, other force axes at zero; the moments
+# are regulated to zero too (centre of pressure under the sensor): left free, they drift with the motor model's
+# errors until the foot tips on the block's edge (docs/results.md, column 'forces only').
+FORCE_AXES = ("fx", "fy", "fz", "tx", "ty")
 FORCE_MAX_DISPLACEMENT = 0.01  # [m] the compatible posture follows the foot up to 1 cm from the start, per axis
 
 POSTURE_TEXT = {
@@ -104,10 +110,10 @@ class Run:
         return out
 
 
-def _control_config(info, k6: float | None, force: bool, k7: float | None = None, motors: str | None = None,
-                    velocity_feedforward: str | None = None):
+def _control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: float | None = None,
+                    motors: str | None = None, velocity_feedforward: str | None = None):
     """config/control.toml with every torque joint at ``k6`` (and ``k7`` [s] if given), the motor file ``motors``
-    and the ``velocity_feedforward`` if given and, if ``force``, the paper's force task."""
+    and the ``velocity_feedforward`` if given and, with ``force_axes``, the paper's force task on those axes."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
 
@@ -129,9 +135,9 @@ def _control_config(info, k6: float | None, force: bool, k7: float | None = None
         data["motors"] = motors
     if velocity_feedforward is not None:
         data["velocity_feedforward"] = velocity_feedforward
-    if force:
+    if force_axes:
         data["force"] = {"sensor": "right_ankle", "frame": "ft_right_ankle", "offset": [0.0, 0.0, -0.02],
-                         "axes": ["fx", "fy", "fz"], "k_f": [FORCE_KF] * 3}
+                         "axes": list(force_axes), "k_f": [FORCE_KF] * len(force_axes)}
     return ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
 
 
@@ -161,7 +167,8 @@ def _ft_offsets_hanging(seed: int, est_cfg) -> np.ndarray:
 def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: float | None = 1.0,
              swing: float | None = SWING, force_profile=None, duration: float | None = None, seed: int = SEED,
              rerun: str | None = None, posture: str = "compatible", k7: float | None = None,
-             motors: str | None = None, velocity_feedforward: str | None = None) -> Run:
+             motors: str | None = None, velocity_feedforward: str | None = None,
+             force_axes: tuple[str, ...] = FORCE_AXES) -> Run:
     """One run: settle in position mode, switch to ``mode``, hold ``HOLD`` s, then the motion or force task.
 
     Args:
@@ -179,6 +186,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
         motors: Motor-parameter file relative to config/ (None: the config's).
         velocity_feedforward: ``estimate`` or ``reference`` velocity in the motor-model feedforward (None: the
             config's).
+        force_axes: Regulated axes of the force task.
         posture: With a force task, the joint reference: ``compatible`` follows the measured motion along the
             task directions (:class:`~servotau.control.trajectory.ForceCompatiblePosture`, paper 5.4), ``start``
             is the start posture.
@@ -194,8 +202,8 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     legs = np.array([info.joint_names.index(j) for j in LEG])
     est_cfg = EstimatorConfig.from_toml(variant="low_delay")
     estimator = TorqueEstimator(info, est_cfg)
-    manager = ControlManager(info, _control_config(info, k6, force_profile is not None, k7, motors,
-                                                  velocity_feedforward))
+    manager = ControlManager(info, _control_config(info, k6, force_axes if force_profile is not None else (), k7,
+                                                  motors, velocity_feedforward))
     stream = None
     if rerun:
         from servotau.viewer import RerunStream, open_recording
@@ -332,12 +340,10 @@ def motion_runs(quick: bool, out: Path, rerun: bool = False) -> dict[str, Run]:
     for k6, k7 in (() if quick else MOTION_EXTRA):
         name = f"{_label(k6)} k7={k7:g}"
         runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, k7=k7)
-    for k6 in (() if quick else DEADBAND_K6):
-        name = f"{_label(k6)} dead band"
-        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, motors=DEADBAND_MODEL)
-    for k6 in (() if quick else PAPER_MODEL_K6):
-        name = f"{_label(k6)} paper model"
-        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, motors=PAPER_MODEL)
+    for label, overrides in ({} if quick else VARIANTS).items():
+        for k6 in VARIANT_K6:
+            name = f"{_label(k6)} {label}"
+            runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, **overrides)
     return runs
 
 
@@ -401,11 +407,11 @@ def force_profile(t: float, f0: np.ndarray) -> np.ndarray:
     return np.array([0.0, 0.0, f0[2] + FORCE_AMPLITUDE * np.sin(2 * np.pi * FORCE_FREQUENCY * t)])
 
 
-def force_run(quick: bool, out: Path, rerun: bool = False, posture: str = "compatible",
-              motors: str | None = None) -> Run:
+def force_run(quick: bool, out: Path, rerun: bool = False, posture: str = "compatible", **overrides) -> Run:
+    """The force task (``overrides``: of :func:`simulate`, e.g. ``motors``, ``force_axes``)."""
     duration = 2.0 / FORCE_FREQUENCY if quick else FORCE_DURATION
     return simulate("force", scenario="force", mode="torque", k6=FORCE_K6, swing=None, force_profile=force_profile,
-                    duration=duration, rerun=_rerun_target(out, rerun, "force"), posture=posture, motors=motors)
+                    duration=duration, rerun=_rerun_target(out, rerun, "force"), posture=posture, **overrides)
 
 
 def force_metrics(run: Run, key: str = "f_hat") -> dict:
@@ -453,14 +459,18 @@ def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | No
     other_name, other_tripped = None, None
     if compare:
         other_name = "start" if posture == "compatible" else "compatible"
-        other = force_run(quick, out, False, other_name)
-        other_tripped = other.tripped
-        metrics[f"measured, {other_name} posture"] = _force_run_metrics(other)["measured"]
-        columns[f"measured, reference = {other_name} posture"] = metrics[f"measured, {other_name} posture"]
-        dead = force_run(quick, out, False, posture, motors=DEADBAND_MODEL)
-        other_tripped = {k: v for k, v in ((other_name, other_tripped), ("dead band", dead.tripped)) if v} or None
-        metrics["measured, dead band model"] = _force_run_metrics(dead)["measured"]
-        columns["measured, dead band model"] = metrics["measured, dead band model"]
+        others = {f"{other_name} posture": {"posture": other_name},
+                  "forces only": {"force_axes": FORCE_AXES[:3]},
+                  **{label: overrides for label, overrides in VARIANTS.items() if label != "paper model"}}
+        other_tripped = {}
+        for label, overrides in others.items():
+            kwargs = {"posture": posture, **overrides}
+            other = force_run(quick, out, False, kwargs.pop("posture"), **kwargs)
+            if other.tripped:
+                other_tripped[label] = other.tripped
+            metrics[f"measured, {label}"] = _force_run_metrics(other)["measured"]
+            columns[f"measured, {label}"] = metrics[f"measured, {label}"]
+        other_tripped = other_tripped or None
     rows = [[k] + [m[k] if m else float("nan") for m in columns.values()]
             for k in ("overshoot_pct", "coupling_x_pct", "coupling_y_pct", "delay_ms", "amplitude_ratio",
                       "rms_error_z_N")]
@@ -468,7 +478,8 @@ def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | No
     if len(run.time) > 1:
         _plot_force(out / "fig5_force_tracking.png", run)
     summary = {"experiment": "force", "quick": quick, "k6": FORCE_K6, "k_f": FORCE_KF, "amplitude_N": FORCE_AMPLITUDE,
-               "frequency_Hz": FORCE_FREQUENCY, "posture": posture, "compared_posture": other_name,
+               "frequency_Hz": FORCE_FREQUENCY, "axes": list(FORCE_AXES), "posture": posture,
+               "compared_posture": other_name,
                "tripped": run.tripped, "compared_tripped": other_tripped, "metrics": metrics, "table": table}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
@@ -601,10 +612,14 @@ def _paper_rms(value: float) -> float:
 
 def write_results(out: Path, doc: Path) -> str:
     """Regenerate ``doc`` from the summaries under ``out`` (experiments not run yet are listed as missing)."""
+    from servotau.config import REPO_ROOT
+
+    shown = Path(out).resolve()
+    shown = shown.relative_to(REPO_ROOT) if shown.is_relative_to(REPO_ROOT) else shown  # no machine path in the doc
     parts = ["# Results: the paper's experiments on the simulated HRP-2",
              "",
              "GENERATED by `servotau experiment motion|force|components|estimation` (control/experiments.py) from "
-             f"the run outputs under `{out}`; do not edit by hand. Deterministic: in-process lock-step backend, "
+             f"the run outputs under `{shown}`; do not edit by hand. Deterministic: in-process lock-step backend, "
              f"seed {SEED}, estimator variant `low_delay`, config/control.toml (k_p = 0.5, k7 = 0.001 s / sqrt(K6), "
              "`k7_scaling = \"inverse_sqrt_k6\"`) with the K6 of each run. Every run: 0.5 s in position mode (F/T "
              "offsets calibrated), switch to the run's mode, "
@@ -617,11 +632,14 @@ def write_results(out: Path, doc: Path) -> str:
     else:
         parts += [f"Hanging robot, `right_leg_swing` of {motion['swing']:g} s plus {TAIL:g} s, evaluated on the TRUE "
                   "joint angles (simulator ground truth) against the reference q_d. Motor model (eq. 10 feedforward) "
-                  f"`config/{motion.get('motors', '?')}`; columns marked 'paper model' use the paper's k_tau, k_v "
-                  f"alone (`config/{PAPER_MODEL}`), columns marked 'k7=' a constant velocity gain [s] instead of the "
-                  "config's k7 / sqrt(K6), columns marked 'dead band' the config's model plus the servo's dead band "
-                  f"measured on the holds of the identification log (`config/{DEADBAND_MODEL}`, control/deadband.py: "
-                  "a feedforward d clip(u / band, -1, 1) in the direction of the predicted command u)."
+                  f"`config/{motion.get('motors', '?')}`. Columns with a suffix change one thing from the config: "
+                  f"'paper model' the paper's k_tau, k_v alone (`config/{PAPER_MODEL}`); 'workbench model' the "
+                  f"workbench's model without the servo's dead band measured on the holds (`config/{WORKBENCH_MODEL}`; "
+                  "control/deadband.py adds it: a feedforward d clip(u / band, -1, 1) in the direction of the "
+                  "predicted command u); 'ff=estimate' the paper's dq_hat in every term of the motor-model "
+                  "feedforward (the config reads the direction of motion of the Coulomb and extra terms from the "
+                  "reference, `velocity_feedforward = \"reference_signs\"`); 'k7=' a constant velocity gain [s] "
+                  "instead of the config's k7 / sqrt(K6)."
                   + (" QUICK run (reduced K6 set)." if motion["quick"] else ""), "",
                   "RMS error sqrt(mean((q_d - q)^2)) [mrad]:", "", motion["tables"]["mean"], "",
                   "Max error max |q_d - q| [mrad]:", "", motion["tables"]["max"], ""]
@@ -649,7 +667,7 @@ def write_results(out: Path, doc: Path) -> str:
                       f"{'PASS' if not fails and not trip else 'MISSED'}{trip}"
                       + (f" (fails: {fails})" if fails else "") + ".", ""]
             for other in (n for n in motion["beats_position"]
-                          if n.startswith((name + " k7=", name + " ff=", name + " dead band"))):
+                          if n.startswith(name + " ")):
                 p = motion["beats_position"][other]
                 fails = [j for j, v in p.items() if not all(v[k] for k in keys)]
                 trip = " (the run TRIPPED)" if motion["tripped"].get(other) else ""
@@ -667,14 +685,15 @@ def write_results(out: Path, doc: Path) -> str:
                             [[j] + [float(_paper_rms(PAPER_MEAN[c][j])) for c in cols] for j in LEG_LABELS[1:]]), "",
                   "Paper, Table 3 (max error, mrad):", "",
                   _markdown(["joint"] + cols, [[j] + [PAPER_MAX[c][j] for c in cols] for j in LEG_LABELS[1:]]), "",
-                  f"Figure: `{out}/motion/fig4_motion_errors.png` (hip roll and ankle pitch errors, as Fig. 4).", ""]
+                  f"Figure: `{shown}/motion/fig4_motion_errors.png` (hip roll and ankle pitch errors, as Fig. 4).", ""]
     force = _load(out, "force")
     parts += ["## Force control (paper 5.4, Fig. 5)", ""]
     if force is None:
         parts += ["Not run.", ""]
     else:
         parts += [f"Scenario `force` (standing, right foot on a 5 cm rigid block), K6 = {force['k6']:g}, K_f = "
-                  f"{force['k_f']:g} on fx, fy, fz at the sole; f_z = f0 + {force['amplitude_N']:g} N "
+                  f"{force['k_f']:g} on {', '.join(force.get('axes', FORCE_AXES))} at the sole; "
+                  f"f_z = f0 + {force['amplitude_N']:g} N "
                   f"sin(2 pi {force['frequency_Hz']:g} t), f_x = f_y = 0. Reference joint angles: "
                   + POSTURE_TEXT[force.get("posture", "start")]
                   + " F/T offsets are calibrated with the same robot (same seed) hanging, feet free, since the "
@@ -686,15 +705,16 @@ def write_results(out: Path, doc: Path) -> str:
                   "frame)." + (" QUICK run (2 periods)." if force["quick"] else ""), ""]
         parts += [force["table"], ""]
         if force.get("compared_posture"):
-            parts += [f"Third column: the same run with the reference joint angles = "
-                      f"{force['compared_posture']} posture, for comparison"
+            parts += [f"Other columns, one change each from the first: reference joint angles = "
+                      f"{force['compared_posture']} posture"
                       + (f" (safety trips: {force['compared_tripped']})" if force.get("compared_tripped") else "")
-                      + ". With the start posture the position feedback cancels part of the commanded force: in "
-                      "steady state (1 + K_f) J^T (f_hat - f_d) = -K_s e_q, and pressing moves the leg (the body "
-                      "rises on the position-servoed left leg, the contacts deflect: about 3 mrad of knee per 22 N, "
-                      "measured with the paper's motor model). Last column: the motor model with the servo's dead band "
-                      f"measured on the holds (`config/{DEADBAND_MODEL}`), as the motion runs marked 'dead band'.",
-                      ""]
+                      + "; 'forces only': the moments left free, as the paper's axes (fx, fy, fz); then the motion "
+                      "runs' variants. With the start posture the position feedback cancels part of the commanded "
+                      "force: in steady state (1 + K_f) J^T (f_hat - f_d) = -K_s e_q, and pressing moves the leg (the "
+                      "body rises on the position-servoed left leg, the contacts deflect: about 3 mrad of knee per 22 "
+                      "N, measured with the paper's motor model). With the moments free the centre of pressure drifts "
+                      "with the motor model's errors at rest; when it reaches the block's edge the foot tips (ankle "
+                      "pitch jumps by about 25 mrad) and the force oscillates.", ""]
         if force["tripped"]:
             parts += [f"Safety trip: {force['tripped']}", ""]
         m = force["metrics"]["measured"]
@@ -706,7 +726,7 @@ def write_results(out: Path, doc: Path) -> str:
                       " A negative value is an undershoot, which the 'at most 5 % overshoot' wording would let "
                       "pass; it is counted as a miss here. Paper: about 10 % overshoot at the apex, about 10 % "
                       "coupling on x, no significant delay.", ""]
-        parts += [f"Figure: `{out}/force/fig5_force_tracking.png`.", ""]
+        parts += [f"Figure: `{shown}/force/fig5_force_tracking.png`.", ""]
     comp = _load(out, "components")
     parts += ["## Control components (paper 5.5, Fig. 6)", ""]
     if comp is None:
@@ -721,14 +741,14 @@ def write_results(out: Path, doc: Path) -> str:
                   "feedback); force control by the torque feedforward (then force feedback). Here, joints (of 6) whose "
                   f"largest share is ff_friction in motion: {f['motion: ff_friction dominates']}; ff_torque in "
                   f"force: {f['force: ff_torque dominates']}. Dominant term per joint: {comp['dominant']}.", "",
-                  f"Figure: `{out}/components/fig6_components.png`.", ""]
+                  f"Figure: `{shown}/components/fig6_components.png`.", ""]
     est = _load(out, "estimation")
     parts += ["## Torque estimation on the motion run (K6 = 1)", ""]
     if est is None:
         parts += ["Not run.", ""]
     else:
         parts += ["Estimator (`low_delay`) joint torques vs the simulator's true link-side joint torques:", "",
-                  est["table"], "", f"Figure: `{out}/estimation/estimation_torques.png`.", ""]
+                  est["table"], "", f"Figure: `{shown}/estimation/estimation_torques.png`.", ""]
     text = "\n".join(parts).rstrip() + "\n"
     doc.parent.mkdir(parents=True, exist_ok=True)
     doc.write_text(text)

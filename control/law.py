@@ -19,7 +19,9 @@ which is exact (not an approximation): the components always sum to the command 
 The motor-model feedforward (``ff_friction``, ``ff_extra``) reads the velocity ``dq_ff`` chosen by
 ``velocity_feedforward``: ``estimate`` is the paper's ``dq_hat``; ``reference`` is ``dq_d``, free of the
 estimator's noise and delay (then ``K_v (dq_d - dq_hat)``, the servo's own damping, is left as velocity feedback
-besides K7). The feedback terms always read the estimates.
+besides K7); ``reference_signs`` keeps the paper's ``K_v dq_hat`` and takes from ``dq_d`` only the direction of
+motion that the Coulomb and extra terms switch on (a noisy, delayed ``dq_hat`` flips them at rest). The feedback
+terms always read the estimates.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ class TorqueControlLaw:
         tc = self.torque
         self.k6 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_s  # [-]
         self.k7 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_d  # [s]
-        self._ff_reference = config.velocity_feedforward == "reference"
+        self._ff_velocity = config.velocity_feedforward
         self._kt_kp = tc.k_tau * tc.k_p
         self._kt_1kp = tc.k_tau * (1.0 + tc.k_p)
         self._tmp = np.zeros(len(config.joint_names))
@@ -65,8 +67,9 @@ class TorqueControlLaw:
         ``dq_err`` (n,) [rad]."""
         idc, tc, t, tmp = self.inverse_dynamics, self.torque, terms, self._tmp
         tau_d = idc.update(q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, wrenches, base)
-        dq_ff = dq_d if self._ff_reference else dq_hat
-        dq_err = tc.update(tau_d, tau_hat, dq_ff, q_hat, ddq_hat, t.time)
+        dq_ff = dq_d if self._ff_velocity == "reference" else dq_hat
+        dq_sign = dq_d if self._ff_velocity == "reference_signs" else None
+        dq_err = tc.update(tau_d, tau_hat, dq_ff, q_hat, ddq_hat, t.time, dq_sign)
         np.multiply(tc.k_tau, idc.tau_ff, out=t.ff_torque)
         np.copyto(t.ff_friction, tc.friction)
         np.copyto(t.ff_extra, tc.extra)

@@ -6,8 +6,8 @@ The command splits into the components of the paper's section 5.5 (all in [rad] 
                          + fb_force + fb_torque_residual + fb_integral + position_command + switch_offset
 
 - ``ff_torque``          K_tau (M ddq_d + h - J^T f_d)  (contacts not regulated: their measured wrench)
-- ``ff_friction``        K_v dq_ff + k_c tanh(dq_ff / v_s), dq_ff = dq_hat (the paper) or dq_d
-  (config ``velocity_feedforward``)
+- ``ff_friction``        K_v dq_ff + k_c tanh(dq_s / v_s), dq_ff = dq_hat (the paper) or dq_d, dq_s = dq_ff or
+  dq_d (config ``velocity_feedforward``)
 - ``ff_extra``           the motor model's extra effect terms (model workbench: deadzone, direction_gain,
   stribeck, delay, ...), i.e. the model's prediction at (tau*, dq_hat, q_hat, ...) minus its paper part
 - ``fb_position``        K6 e_q = K_tau (1 + K_p) K_s e_q

@@ -111,7 +111,8 @@ class JointTorqueController:
         return bool(self._online)
 
     def update(self, tau_d: np.ndarray, tau_hat: np.ndarray, dq_hat: np.ndarray, q_hat: np.ndarray | None = None,
-               ddq_hat: np.ndarray | None = None, time: float | None = None) -> np.ndarray:
+               ddq_hat: np.ndarray | None = None, time: float | None = None,
+               dq_sign: np.ndarray | None = None) -> np.ndarray:
         """``dq_err`` (n,) [rad] for desired torques ``tau_d`` [N m], estimated torques ``tau_hat`` [N m] and
         velocities ``dq_hat`` [rad/s]; advances the integral and the extra terms' state by one period.
 
@@ -121,6 +122,8 @@ class JointTorqueController:
             q_hat: (n,) [rad] estimated angles, needed by extra terms that read ``q`` or ``q_des``.
             ddq_hat: (n,) [rad/s^2] estimated accelerations, needed by ``elastic`` and ``backlash``.
             time: [s] robot time of the tick (default: ticks since construction times the period).
+            dq_sign: (n,) [rad/s] velocities the direction-dependent terms read (Coulomb ``k_c`` and the extra
+                terms; default ``dq_hat``): the reference's with ``velocity_feedforward = "reference_signs"``.
 
         Raises:
             ControlError: An extra term needs ``q_hat`` or ``ddq_hat`` and it was not given.
@@ -137,15 +140,16 @@ class JointTorqueController:
             np.clip(self.integral, self._i_min, self._i_max, out=self.integral)
             np.multiply(self.k_i, self.integral, out=self.integral_term)
             self.tau_star += self.integral_term
-        # Friction feedforward: K_v dq + k_c tanh(dq / v_s)
+        # Friction feedforward: K_v dq + k_c tanh(dq_sign / v_s)
+        dq_sign = dq_hat if dq_sign is None else dq_sign
         np.multiply(self.k_v, dq_hat, out=self.friction)
         if self._has_coulomb:
-            np.multiply(dq_hat, 1.0 / self.sign_velocity, out=tmp)
+            np.multiply(dq_sign, 1.0 / self.sign_velocity, out=tmp)
             np.tanh(tmp, out=tmp)
             tmp *= self.k_c
             self.friction += tmp
         if self._online:
-            self._update_extra(dq_hat, q_hat, ddq_hat, time)
+            self._update_extra(dq_sign, q_hat, ddq_hat, time)
         # dq_err = K_tau tau* + friction + extra
         np.multiply(self.k_tau, self.tau_star, out=self.dq_err)
         self.dq_err += self.friction
@@ -154,8 +158,8 @@ class JointTorqueController:
         self._ticks += 1
         return self.dq_err
 
-    def _update_extra(self, dq_hat, q_hat, ddq_hat, time) -> None:
-        """``extra`` [rad]: the on-line model at (tau*, dq_hat, ...) minus its linear and Coulomb part."""
+    def _update_extra(self, dq_sign, q_hat, ddq_hat, time) -> None:
+        """``extra`` [rad]: the on-line model at (tau*, dq_sign, ...) minus its linear and Coulomb part."""
         if q_hat is None and ("q" in self.extra_signals or "q_des" in self.extra_signals):
             raise ControlError(f"q_hat is None: expected (n,) angles [rad] for the extra motor-model terms "
                                f"(they read {list(self.extra_signals)})")
@@ -164,7 +168,7 @@ class JointTorqueController:
                                f"terms (they read {list(self.extra_signals)})")
         t = self._ticks * self.period if time is None or time != time else float(time)  # NaN: not set
         for i, om, reads_q_des, k_tau, k_v, k_c in self._online:
-            tau, dq = float(self.tau_star[i]), float(dq_hat[i])
+            tau, dq = float(self.tau_star[i]), float(dq_sign[i])
             q = None if q_hat is None else float(q_hat[i])
             ddq = None if ddq_hat is None else float(ddq_hat[i])
             if reads_q_des:

@@ -91,17 +91,19 @@ def test_terms_share_the_law_buffers():
     assert not any(v.any() for v in terms.components().values())
 
 
-@pytest.mark.parametrize("source", ["estimate", "reference"])
+@pytest.mark.parametrize("source", ["estimate", "reference", "reference_signs"])
 def test_velocity_feedforward_reads_the_configured_velocity(source):
-    """ff_friction is K_v dq + k_c tanh(dq / v_s) on dq_hat ("estimate") or dq_d ("reference"); fb_* keep dq_hat."""
+    """ff_friction is K_v dq + k_c tanh(dq / v_s) on dq_hat ("estimate") or dq_d ("reference"), or K_v dq_hat +
+    k_c tanh(dq_d / v_s) ("reference_signs"); fb_* keep dq_hat."""
     cfg = _config(force=False, velocity_feedforward=source)
     law = TorqueControlLaw(cfg, str(MODEL_PATH), 1e-3)
     terms = law.make_terms()
     q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, w, rng = _inputs(seed=3)
     dq_err = law.update(terms, q_hat, dq_hat, ddq_hat, rng.normal(0, 20, 30), q_d, dq_d, ddq_d, w)
-    dq_ff = dq_hat if source == "estimate" else dq_d
+    dq_ff = dq_d if source == "reference" else dq_hat
+    dq_sign = dq_hat if source == "estimate" else dq_d
     k_v, k_c = cfg.motor_vector("k_v"), cfg.motor_vector("k_c")
-    expected = k_v * dq_ff + k_c * np.tanh(dq_ff / cfg.sign_velocity)
+    expected = k_v * dq_ff + k_c * np.tanh(dq_sign / cfg.sign_velocity)
     np.testing.assert_allclose(terms.ff_friction[:5], expected[:5], rtol=1e-12)  # joint 5 has extra terms
     assert np.abs(terms.ff_friction[:5]).min() > 0
     np.testing.assert_allclose(terms.fb_velocity, law.k7 * (dq_d - dq_hat), rtol=1e-12)

@@ -127,6 +127,31 @@ def test_extra_terms_of_the_motor_file_change_the_command_as_the_model_predicts(
     assert not tc.extra[others].any()
 
 
+def test_direction_terms_read_dq_sign_and_the_viscous_term_dq_hat(tmp_path):
+    """With ``dq_sign`` (velocity_feedforward = "reference_signs"), the extra terms are the model's at dq_sign and
+    the viscous term stays K_v dq_hat: dq_err = model(tau*, dq_sign) + K_v (dq_hat - dq_sign)."""
+    motors = MotorParameters.load_toml(_extra_file(tmp_path))
+    knee = motors["RLEG_JOINT3"]
+    tc = JointTorqueController(JOINT_NAMES, motors, {"RLEG_JOINT3": JointGains(k_p=0.5)}, 1e-3)
+    rng = np.random.default_rng(2)
+    ticks = 200
+    t = 1e-3 * np.arange(ticks)
+    dq_ref = 0.3 * np.sin(2 * np.pi * 2 * t)  # the reference's velocity
+    dq_est = dq_ref + rng.normal(0, 0.02, ticks)  # the estimate: noisy around it
+    got, tau_star = np.zeros(ticks), np.zeros(ticks)
+    vec = {k: np.zeros(30) for k in ("tau_d", "tau_hat", "dq_hat", "dq_sign", "q")}
+    for k in range(ticks):
+        for name, v in (("tau_d", 30 * np.sin(2 * np.pi * t[k])), ("tau_hat", 0.0), ("dq_hat", dq_est[k]),
+                        ("dq_sign", dq_ref[k]), ("q", 0.8)):
+            vec[name][KNEE] = v
+        got[k] = tc.update(vec["tau_d"], vec["tau_hat"], vec["dq_hat"], vec["q"], np.zeros(30), t[k],
+                           dq_sign=vec["dq_sign"])[KNEE]
+        tau_star[k] = tc.tau_star[KNEE]
+        assert tc.friction[KNEE] == pytest.approx(knee.k_v * dq_est[k], abs=1e-15)
+    expected = knee.predict(tau_star, dq_ref, q=np.full(ticks, 0.8), t=t) + knee.k_v * (dq_est - dq_ref)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+
+
 def test_delay_term_solves_the_command_it_reads(tmp_path):
     """A `delay` term reads this tick's q_des: the controller's command satisfies q_des - q = model(q_des)."""
     text = MOTORS_WITH_EXTRA.split("[joints.RLEG_JOINT3.extra.deadzone]")[0]
