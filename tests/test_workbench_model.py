@@ -29,7 +29,7 @@ SHAPES = {
     "stiction": {"v_th": 0.01}, "deadzone": {"band": 3e-4, "damping_share": 0.67, "v_th": 0.02},
     "direction_gain": {"v_eps": 0.02}, "backlash": {"window": 0.011, "tau_band": 5.0, "gain": 1.0, "lag": 0.005},
     "load_friction": {"v_eps": 0.02}, "cogging": {"period": 0.08, "phase": 0.3}, "thermal_drift": {"tau_th": 30.0},
-    "saturation": {"u_sat": 2e-3, "damping_share": 0.67}, "elastic": {"window": 0.011, "lag": 0.002},
+    "saturation": {"tau_sat": 30.0, "beta": 5.0, "release": 0.8}, "elastic": {"window": 0.011, "lag": 0.002},
     "motor_lag": {"time_constant": 0.01}, "delay": {"delay": 0.005},
 }
 
@@ -37,7 +37,7 @@ SHAPES = {
 def model_with(*effects) -> MotorModel:
     coefs = {"coulomb": 1e-4, "stribeck": 2e-4, "cogging": 1e-4, "deadzone": 1e-4, "direction_gain": -0.05,
              "delay": 0.5, "motor_lag": 0.3, "thermal_drift": 1e-4, "stiction": 5e-5, "elastic": 3e-5,
-             "backlash": 3e-5, "load_friction": 2e-6, "coulomb_asym": 5e-5, "saturation": 2e-4}
+             "backlash": 3e-5, "load_friction": 2e-6, "coulomb_asym": 5e-5, "saturation": 1.0}
     extra = {e: EffectTerm(coefs[e], SHAPES[e]) for e in effects}
     return MotorModel(k_tau=5e-5, k_v=6e-3, k_c=None if "coulomb" in effects else 1e-4, extra=extra,
                       provenance="test")
@@ -94,6 +94,41 @@ def test_online_command_solves_for_the_delayed_command():
         assert qd - q == pytest.approx(check.step(tau, dq, q=q, q_des=qd, t=k * 1e-3), abs=1e-12)
     with pytest.raises(IdentificationError, match="missing signal"):
         OnlineModel(m, 1e-3).step(1.0, 0.1)
+
+
+def test_saturation_holds_the_limit_with_hysteresis_and_integrates_the_command_lead():
+    """The limit detector is the recursion s[k] = x[k] > (off if s[k-1] else on); the term is the change of
+    q_des(t - 1) - q(t) since the onset of each saturated run, zero at the onset and below the limit."""
+    from servotau.identification.workbench.library import saturation
+    from servotau.identification.workbench.signals import Signals, hysteresis
+
+    x = np.array([0.0, 5.0, 11.0, 9.0, 7.0, 12.0, 3.0, 9.5, 10.5, 8.5])
+    s, expected = False, []
+    for v in x:
+        s = v > (8.0 if s else 10.0)
+        expected.append(s)
+    np.testing.assert_array_equal(hysteresis(x, 10.0, 8.0), expected)
+    q = np.zeros(len(x))
+    q_des = np.arange(len(x)) * 1e-3  # [rad] the command runs ahead, 1 mrad per tick
+    sig = Signals({"tau": x, "dq": np.zeros(len(x)), "q": q, "q_des": q_des}, 1e-3, len(x))
+    phi = saturation(sig, tau_sat=10.0, beta=0.0, release=0.8)
+    # saturated at 2-3, 5 and 8-9 (onsets 2, 5, 8): lead(t) - lead(onset), lead = q_des[k-1] - q[k]
+    np.testing.assert_allclose(phi, [0, 0, 0, 1e-3, 0, 0, 0, 0, 0, 1e-3], atol=1e-15)
+    with pytest.raises(IdentificationError, match="off"):
+        hysteresis(x, 8.0, 10.0)
+
+
+def test_online_saturation_term_does_not_read_this_ticks_command():
+    """Past the limit the command does not set the torque: the on-line term reads the previous commands
+    only, so command() solves for q_des without dividing by a slope near zero."""
+    m = model_with("saturation")
+    on = m.online(1e-3)
+    for k in range(20):
+        q = 1e-4 * k
+        on.step(40.0, 0.0, q=q, q_des=q + 3e-3 + 1e-3 * k, t=1e-3 * k)  # held at the limit, the command running ahead
+    a = on.predict(40.0, 0.0, q=0.002, q_des=0.0, t=0.02)
+    b = on.predict(40.0, 0.0, q=0.002, q_des=1.0, t=0.02)
+    assert a == b and a != 5e-5 * 40.0
 
 
 def test_fitted_model_round_trips_through_the_motor_parameter_file(tmp_path):

@@ -18,7 +18,7 @@ effect                    phi                                                   
 ``backlash``              ``a (1 + gain exp(-(tau / tau_band)^2))``              tau, ddq (+ history if lag)
 ``cogging``               ``sin(2 pi q / period + phase)``                       q
 ``thermal_drift``         ``h dq``, ``h`` = lag(``(u / 1 mrad)^2``, tau_th)      tau, dq history (a lag)
-``saturation``            ``sign(m) [|m| > u_sat]``, m = u - 0.67 k_v dq         tau, dq
+``saturation``            ``[sat] (lead(t) - lead(t_onset))``, see below         tau, dq, q, q_des (history)
 ``elastic``               ``a``                                                  ddq (+ history if lag)
 ``motor_lag``             ``lag(u, time_constant) - u``                          tau, dq history (a lag)
 ``delay``                 ``q_des(t) - q_des(t - delay)``                        q_des history
@@ -28,6 +28,11 @@ effect                    phi                                                   
 ``z`` the sign of the last ``|m| > band`` (``v_th = 0``: no latch, ``phi = c``). A dead band on the position
 error lets the joint rest anywhere inside it with no servo torque: held by friction after a push it stays
 at the edge it was pushed to (``z``); crossing the band freely (fast) it is on average at the centre.
+
+``saturation``: saturated while the motor-torque proxy ``|tau + beta dq|`` exceeds ``tau_sat`` [N m] (until it
+falls below ``release tau_sat``); ``lead = q_des(t - 1 tick) - q(t)``, its change since the onset of the limit is
+the integral of the command's lead the servo cannot close (the measured error since the onset: the term resets
+the model to the error measured when the limit was reached).
 
 ``a`` is the acceleration ``ddq`` (centred SG of ``q`` over ``window``, or the estimator's), delayed by
 ``lag`` like the torque estimate (see :func:`inertia`).
@@ -42,7 +47,7 @@ import numpy as np
 
 from .effects import Effect, register_effect
 from .excitation import Excitation
-from .signals import Signals, delayed, direction_latch, lowpass, lowpass_gain, ticks
+from .signals import Signals, delayed, direction_latch, hysteresis, lowpass, lowpass_gain, run_onsets, ticks
 
 U_REF = 1e-3  # [rad] scale of u in the thermal heating proxy
 
@@ -215,16 +220,51 @@ def thermal_drift(s: Signals, tau_th: float) -> np.ndarray:
     return heat * s["dq"]
 
 
-def saturation(s: Signals, u_sat: float, damping_share: float = 0.67) -> np.ndarray:
-    m = s["u"] - damping_share * s["u_v"]
-    return np.sign(m) * (np.abs(m) > u_sat)
+def motor_torque_proxy(s: Signals, beta: float) -> np.ndarray:
+    """``tau + beta dq`` [N m]: the torque estimate plus the damping outside the servo (``beta`` [N m s/rad]),
+    what the motor must produce; it sits at the current limit while the servo saturates. Read from the
+    signals only, not from the model: a model fitted on saturated data is bent by them."""
+    return s["tau"] + beta * s["dq"]
+
+
+def command_lead(s: Signals) -> np.ndarray:
+    """``q_des(t - 1 tick) - q(t)`` [rad]: the error the servo has to close at the start of the tick, up to
+    the previous command (the integral of ``dq_des - dq``; this tick's command is not read)."""
+    return delayed(s["q_des"], 1) - s["q"]
+
+
+def saturation(s: Signals, tau_sat: float, beta: float, release: float = 0.8) -> np.ndarray:
+    """The error's growth since the current limit was reached [rad], zero below the limit.
+
+    Saturated: ``|tau + beta dq| > tau_sat`` [N m], held until it falls to ``release tau_sat`` (hysteresis:
+    the proxy is noisy at the limit). Past the limit the servo torque no longer follows the error: the
+    command's lead that the servo cannot close integrates, ``phi = lead(t) - lead(t_onset)`` with
+    ``lead = q_des(t - 1) - q(t)`` (:func:`command_lead`). This is the measured error since the onset: the
+    term resets the model to the error it measured when the limit was reached (output-error form).
+    """
+    flag = hysteresis(np.abs(motor_torque_proxy(s, beta)), tau_sat, release * tau_sat)
+    lead = command_lead(s)
+    onset = run_onsets(flag)
+    return np.where(flag, lead - lead[np.maximum(onset, 0)], 0.0)
+
+
+_SAT_LEVELS = (0.7, 0.8, 0.9, 0.95, 0.97, 0.99)  # quantiles of the proxy: the limit may hold up to 30 % of a log
+_SAT_DAMPING = (0.5, 1.0, 1.5, 2.0)  # beta in units of the data's P99 |tau| / P99 |dq|
+_SAT_RELEASE = 0.8  # leave the limit when the proxy falls below 80 % of it
 
 
 def _saturation_grid(s: Signals) -> tuple[dict[str, float], ...]:
-    """Thresholds at high quantiles of the motor-torque proxy of the data (the limit is where it piles up)."""
-    m = np.abs(s["u"] - 0.67 * s["u_v"])
-    levels = np.quantile(m, (0.9, 0.97, 0.99))
-    return tuple({"u_sat": float(f"{v:.4g}"), "damping_share": 0.67} for v in levels)
+    """Thresholds at high quantiles of the motor-torque proxy ``|tau + beta dq|`` [N m] (the limit is where it
+    piles up), for damping ``beta`` [N m s/rad] scaled by the data (its 99th percentiles of torque and
+    velocity)."""
+    dq99 = float(np.quantile(np.abs(s["dq"]), 0.99))
+    scale = float(np.quantile(np.abs(s["tau"]), 0.99)) / dq99 if dq99 > 0 else 0.0
+    out = []
+    for f in _SAT_DAMPING if scale > 0 else (0.0,):
+        beta = float(f"{f * scale:.3g}")
+        levels = np.quantile(np.abs(motor_torque_proxy(s, beta)), _SAT_LEVELS)
+        out += [{"tau_sat": float(f"{v:.4g}"), "beta": beta, "release": _SAT_RELEASE} for v in levels]
+    return tuple(out)
 
 
 def elastic(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
@@ -364,6 +404,34 @@ class _DelayOnline:
             del self.buf[0]
 
 
+class _SaturationOnline:
+    """``saturation`` on-line: the limit detector's state, the last command and the lead at the onset."""
+
+    def __init__(self, shape: Mapping[str, float], period: float):
+        self.tau_sat, self.beta = shape["tau_sat"], shape["beta"]
+        self.release = shape.get("release", _SAT_RELEASE)
+        self.saturated = False
+        self.q_des_prev: float | None = None  # [rad] the command of the last tick
+        self.onset_lead = 0.0  # [rad]
+
+    def _saturated(self, x: Mapping[str, float]) -> bool:
+        level = self.release * self.tau_sat if self.saturated else self.tau_sat
+        return abs(x["tau"] + self.beta * x["dq"]) > level
+
+    def value(self, x: Mapping[str, float]) -> float:
+        if not (self.saturated and self._saturated(x)):
+            return 0.0  # below the limit, or its onset (this tick's command is not read)
+        return self.q_des_prev - x["q"] - self.onset_lead
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        sat = self._saturated(x)
+        if sat and not self.saturated:
+            prev = x["q_des"] if self.q_des_prev is None else self.q_des_prev
+            self.onset_lead = prev - x["q"]
+        self.saturated = sat
+        self.q_des_prev = x["q_des"]
+
+
 _V_EPS = (0.0, 0.005, 0.01, 0.02, 0.05)  # [rad/s] sign smoothing
 _V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
 _REST = (0.0, 0.01, 0.05)  # [rad/s] dead zone: resting below this speed at the last edge (0: no latch)
@@ -438,10 +506,11 @@ BUILTIN = (
         online=_ThermalOnline, history=True,
     ),
     Effect(
-        "saturation", saturation, _saturation_grid, ("tau", "dq", "u", "u_v"),
-        "large residuals of the sign of u where the motor-torque proxy sits at its largest values (the current "
-        "limit); the error past the limit is not a function of the torque, so no term removes it all",
-        "servo_error", "current limit: past it the servo cannot produce more torque", _has_torque,
+        "saturation", saturation, _saturation_grid, ("q", "q_des", "tau", "dq"),
+        "large residuals of one sign where the motor-torque proxy |tau + beta dq| sits at its largest values (the "
+        "current limit), growing with the command's lead over the joint while it stays there",
+        "servo_error", "current limit: past it the servo torque no longer follows the position error, which "
+        "integrates the command's lead the servo cannot close", _has_torque, online=_SaturationOnline, history=True,
     ),
     Effect(
         "elastic", elastic, tuple({"window": w, "lag": lag} for w in (0.011, 0.021, 0.041, 0.081) for lag in _LAGS),
@@ -527,8 +596,5 @@ SCALAR = {
     "direction_gain": lambda x, v_eps: _ssign(x["dq"], v_eps) * x["u"],
     "load_friction": lambda x, v_eps: abs(x["tau"]) * _ssign(x["dq"], v_eps),
     "cogging": lambda x, period, phase=0.0: math.sin(2.0 * math.pi * x["q"] / period + phase),
-    "saturation": lambda x, u_sat, damping_share=0.67: (
-        _ssign(x["u"] - damping_share * x["u_v"], 0.0) * (abs(x["u"] - damping_share * x["u_v"]) > u_sat)
-    ),
 }
 """``phi(sample, **shape)`` of the built-in effects without memory, on one sample (a mapping of floats)."""

@@ -5,12 +5,14 @@ Signals each effect needs on-line (``ONLINE_SIGNALS``): the controller gives ``t
 estimated torque), ``dq`` [rad/s], ``q`` [rad], ``q_des`` [rad] (the command of this tick), ``t`` [s] and,
 for ``elastic`` and ``backlash``, the estimator's ``ddq`` [rad/s^2] (off-line the workbench filters ``q``
 with the term's ``window``; given ``ddq``, :func:`predict_batch` uses it instead, as on-line). Effects
-with memory (``stiction``, ``thermal_drift``, ``motor_lag``, ``delay``, and ``elastic`` and ``backlash``
-with a ``lag``) keep their state in the :class:`OnlineModel`; call :meth:`OnlineModel.step` exactly once
+with memory (``stiction``, ``thermal_drift``, ``motor_lag``, ``delay``, ``saturation``, and ``elastic`` and
+``backlash`` with a ``lag``) keep their state in the :class:`OnlineModel`; call :meth:`OnlineModel.step` exactly once
 per tick.
 
 ``delay`` reads the command of the current tick: the model is then affine in ``q_des``, and
-:meth:`OnlineModel.command` solves ``q_des = q + model(q_des)`` for the feedforward.
+:meth:`OnlineModel.command` solves ``q_des = q + model(q_des)`` for the feedforward. ``saturation`` reads
+the commands of the previous ticks only (past the limit the command does not set the torque): its
+term does not change with this tick's command.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ ONLINE_SIGNALS = {
     "backlash": "tau, ddq (the estimator's acceleration; history: the last `lag` seconds of it)",
     "cogging": "q",
     "thermal_drift": "tau, dq (history: a first-order lag of the servo effort)",
-    "saturation": "tau, dq",
+    "saturation": "tau, dq, q, q_des (history: the limit detector's state, the last command, the lead at the onset)",
     "elastic": "ddq (the estimator's acceleration; history: the last `lag` seconds of it)",
     "motor_lag": "tau, dq (history: a first-order lag)",
     "delay": "q_des (history: the commands of the last `delay` seconds, and this tick's)",

@@ -5,12 +5,12 @@ An effect is a function of :class:`Signals`, a read-only mapping from signal nam
 
 - ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], ``dq`` [rad/s], ``ddq`` [rad/s^2];
 - ``u`` [rad]: the linear part of the current model, ``k_tau tau + k_v dq``: the servo error the paper's
-  model expects (dead zone, direction gain, saturation and thermal drift act on it);
+  model expects (dead zone, direction gain and thermal drift act on it);
 - every other column of the log, under its own name (for user-defined effects).
 
-Filters with memory (delays, first-order lags, the direction latch) are written as one-step
-recursions, evaluated here over a whole array and by :mod:`~servotau.identification.workbench.online`
-one sample at a time, so both give the same numbers.
+Filters with memory (delays, first-order lags, the direction latch, the limit detector with hysteresis) are
+written as one-step recursions, evaluated here over a whole array and by
+:mod:`~servotau.identification.workbench.online` one sample at a time, so both give the same numbers.
 """
 
 from __future__ import annotations
@@ -123,3 +123,27 @@ def direction_latch(dq: np.ndarray, threshold: float) -> np.ndarray:
     out = np.sign(dq[np.maximum(idx, 0)])
     out[idx < 0] = 0.0
     return out
+
+
+def run_onsets(flag: np.ndarray) -> np.ndarray:
+    """Index of the first sample of the run of ``True`` each sample belongs to (-1 before the first run;
+    meaningful where ``flag`` is True)."""
+    idx = np.arange(len(flag))
+    start = flag & ~np.concatenate([[False], flag[:-1]])
+    out = np.where(start, idx, -1)
+    np.maximum.accumulate(out, out=out)
+    return out
+
+
+def hysteresis(x: np.ndarray, on: float, off: float) -> np.ndarray:
+    """A detector with hysteresis: True from the first ``x > on`` until ``x <= off`` (``off <= on``).
+
+    One-step recursion ``s[k] = x[k] > (off if s[k-1] else on)``, written over the whole array: a sample
+    is on if ``x > off`` and some sample of the same run of ``x > off`` reached ``on`` before it (or at it).
+    """
+    if off > on:
+        raise IdentificationError(f"hysteresis: off = {off!r} > on = {on!r}: expected off <= on")
+    above_off = x > off
+    idx = np.arange(len(x))
+    last_on = np.maximum.accumulate(np.where(x > on, idx, -1))
+    return above_off & (last_on >= run_onsets(above_off)) & (last_on >= 0)
