@@ -55,8 +55,9 @@ FORCE_DURATION = 6.0  # [s] of sinusoid (3 periods)
 FORCE_K6 = 0.1
 FORCE_KF = 1.0
 # Regulated axes of the sole wrench. The paper (5.4) regulates the force, other force axes at zero; the moments
-# are regulated to zero too (centre of pressure under the sensor): left free, they drift with the motor model's
-# errors until the foot tips on the block's edge (docs/results.md, column 'forces only').
+# are held at their value at the start of the task too (the centre of pressure stays where the foot settled): left
+# free, they drift with the motor model's errors until the foot tips on the block's edge (docs/results.md, column
+# 'forces only').
 FORCE_AXES = ("fx", "fy", "fz", "tx", "ty")
 FORCE_MAX_DISPLACEMENT = 0.01  # [m] the compatible posture follows the foot up to 1 cm from the start, per axis
 
@@ -66,7 +67,8 @@ POSTURE_TEXT = {
                   "start posture during the first period, which also calibrates the contact compliance C (least "
                   "squares of the foot's displacement J (q_hat - q0) on the measured f_z change, with intercept and "
                   "trend), then q0 + J^+ C (f_d - f0): the posture the robot takes when the force is the reference, "
-                  "so the position feedback (K6 = 0.1) no longer cancels part of the commanded force.",
+                  "so the position feedback (K6 = 0.1) no longer cancels part of the commanded force; its velocity "
+                  "and acceleration follow df_d/dt.",
 }
 
 # Paper, Tables 2 and 3 (rad * 1e3 = mrad); the paper has no hip-yaw row.
@@ -242,12 +244,13 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
             if force_profile is not None and f_meas is not None:
                 if t >= 0 and f0 is None:
                     f0 = f_meas.copy()
-                f_d = np.zeros(6)
-                f_d[:3] = f_meas if t < 0 else force_profile(t, f0)  # before the task: hold the measured force
+                # Before the task: the measured wrench (no regulation). Then the force profile, and the moments
+                # held at their start value (the centre of pressure stays where the foot settled).
+                f_d = f_meas.copy() if t < 0 else np.concatenate([force_profile(t, f0[:3]), f0[3:]])
                 manager.set_force_reference(f_d)
             terms = manager.tick(frame, estimate if estimate.valid else None, ref)
             if force_profile is not None:
-                f_meas = np.array(terms.f_hat[:3], dtype=float)
+                f_meas = np.array(terms.f_hat, dtype=float)
             backend.write(dict(zip(info.joint_names, terms.q_des, strict=True)))
             truth = backend.ground_truth()
             if t >= 0:
@@ -694,7 +697,8 @@ def write_results(out: Path, doc: Path) -> str:
         parts += [f"Scenario `force` (standing, right foot on a 5 cm rigid block), K6 = {force['k6']:g}, K_f = "
                   f"{force['k_f']:g} on {', '.join(force.get('axes', FORCE_AXES))} at the sole; "
                   f"f_z = f0 + {force['amplitude_N']:g} N "
-                  f"sin(2 pi {force['frequency_Hz']:g} t), f_x = f_y = 0. Reference joint angles: "
+                  f"sin(2 pi {force['frequency_Hz']:g} t), f_x = f_y = 0, moments (if regulated) held at their "
+                  "start value. Reference joint angles: "
                   + POSTURE_TEXT[force.get("posture", "start")]
                   + " F/T offsets are calibrated with the same robot (same seed) hanging, feet free, since the "
                   "feet are loaded in this scenario. Metrics after the first period: overshoot = max over the "

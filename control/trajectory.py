@@ -95,6 +95,9 @@ class ForceCompatiblePosture:
     depends on the force reference, not on the measured motion, so the position feedback keeps its stiffness
     (a force task alone has none along its axes; following the measured motion instead drifts and, with little
     stiffness left, oscillates), holds every other direction, and ``x_max`` bounds how far the task moves it.
+    Its velocity and acceleration are ``J^+ C`` times the force reference's first and second backward
+    differences (0 on a clipped axis): the velocity feedback then damps only deviations from that motion, and the
+    motor model's direction terms (Coulomb, with ``velocity_feedforward = "reference_signs"``) see it.
     """
 
     def __init__(self, q0: np.ndarray, joints: np.ndarray, calibration: float, max_displacement: float = 0.01):
@@ -119,14 +122,17 @@ class ForceCompatiblePosture:
         self.compliance: np.ndarray | None = None  # [m/N] (k, k) C, once calibrated
         self.displacement = np.zeros(0)  # [m] C (f_d - f0), clipped, of the last update
         self._samples: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._last: tuple[float, np.ndarray, np.ndarray | None] | None = None  # time [s], f_d [N], df_d [N/s]
 
     def update(self, time: float, q_hat: np.ndarray, task_jacobian: np.ndarray | None, f_hat: np.ndarray,
                f_d: np.ndarray) -> TrajectoryPoint:
         """The reference at ``time`` [s] for the estimated angles ``q_hat`` (n,), the task Jacobian (k, n) of the
         last control tick (None: ``q0``), the measured and desired task forces (k,) [N]. The returned point is
         the same object every call, refreshed in place."""
-        q = self.point.q
+        q, dq, ddq = self.point.q, self.point.dq, self.point.ddq
         np.copyto(q, self.q0)
+        dq.fill(0.0)
+        ddq.fill(0.0)
         if task_jacobian is None:
             return self.point
         j = task_jacobian[:, self.joints]
@@ -139,9 +145,23 @@ class ForceCompatiblePosture:
             if float(time) - self.t0 >= self.calibration:
                 self.compliance = self._fit()
             return self.point
-        x_ref = np.clip(self.compliance @ (np.asarray(f_d) - self.f0), -self.max_displacement, self.max_displacement)
-        q[self.joints] += j.T @ np.linalg.solve(j @ j.T, x_ref)
+        f_d = np.array(f_d, dtype=float)
+        x_ref = np.clip(self.compliance @ (f_d - self.f0), -self.max_displacement, self.max_displacement)
+        moving = np.abs(x_ref) < self.max_displacement  # a clipped axis holds still
+        pinv_t = j.T @ np.linalg.inv(j @ j.T)
+        q[self.joints] += pinv_t @ x_ref
         self.displacement = x_ref
+        # Velocity and acceleration of the reference, from the force reference's differences (deterministic, smooth):
+        # without them the velocity feedback brakes, and the direction terms of the motor model ignore, the motion
+        # the force task needs.
+        df_d = None
+        if self._last is not None and time > self._last[0]:
+            dt = float(time) - self._last[0]
+            df_d = (f_d - self._last[1]) / dt
+            dq[self.joints] = pinv_t @ (moving * (self.compliance @ df_d))
+            if self._last[2] is not None:
+                ddq[self.joints] = pinv_t @ (moving * (self.compliance @ ((df_d - self._last[2]) / dt)))
+        self._last = (float(time), f_d, df_d)
         return self.point
 
     def _fit(self) -> np.ndarray:

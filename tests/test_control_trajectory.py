@@ -45,6 +45,34 @@ def test_reference_moves_the_contact_by_the_calibrated_compliance_times_the_forc
     np.testing.assert_allclose(np.abs(jac @ (ref.q - q0)), 0.01, rtol=1e-9)
 
 
+def test_reference_velocity_and_acceleration_follow_the_force_reference():
+    """After calibration, J dq_ref = C df_d/dt and J ddq_ref = C d2f_d/dt2 (finite differences of the smooth force
+    reference), so the velocity feedback does not brake the motion the force task needs; 0 before and when clipped."""
+    rng = np.random.default_rng(1)
+    jac, q0 = _jacobian(rng), rng.normal(0, 0.5, 12)
+    c_z = np.array([1e-5, -2e-5, 4e-5])  # [m/N]
+    f0 = np.array([0.0, 0.0, 250.0])
+    pinv = np.linalg.pinv(jac[:, JOINTS])
+    posture = ForceCompatiblePosture(q0, JOINTS, calibration=1.0)
+    dt, w, a = 1e-3, np.pi, 40.0
+    for k in range(1501):
+        t = k * dt
+        f_d = np.array([0.0, 0.0, f0[2] + a * np.sin(w * t)])
+        q_hat = q0.copy()
+        q_hat[JOINTS] += pinv @ (c_z * (f_d[2] - f0[2]))
+        ref = posture.update(t, q_hat, jac, f_d, f_d)
+        if posture.compliance is None or k < 1003:  # calibrating, then one tick without a previous velocity
+            assert not ref.ddq.any()
+            continue
+        # backward differences: the velocity of half a tick ago, the acceleration of one tick ago
+        np.testing.assert_allclose(jac @ ref.dq, c_z * a * w * np.cos(w * (t - dt / 2)), rtol=0,
+                                   atol=1e-6 * a * w * 4e-5)
+        np.testing.assert_allclose(jac @ ref.ddq, -c_z * a * w**2 * np.sin(w * (t - dt)), rtol=0,
+                                   atol=1e-4 * a * w**2 * 4e-5)
+    ref = posture.update(1.6, q0, jac, f0, np.array([0.0, 0.0, f0[2] + 1e4]))  # clipped: holds still
+    assert not ref.dq[JOINTS].any()
+
+
 def test_bad_settings_raise():
     """A calibration time or a displacement bound that is not > 0 raises ControlError naming it."""
     with pytest.raises(ControlError, match="calibration"):
