@@ -131,3 +131,21 @@ def test_unknown_effect_and_bad_threshold_are_refused():
         parse_spec("coulomb+frobnicate", ds.signals)
     with pytest.raises(IdentificationError, match="min_gain"):
         diagnose(ds, parse_spec("coulomb", ds.signals), min_gain=1.5)
+
+
+def test_a_coefficient_outside_the_physical_range_is_not_chosen():
+    """An effect whose physics allows only positive coefficients is not named for a ripple it fits with a
+    negative one (that block keeps the base model: gain 0), and is named when the range admits it."""
+    ds = load_dataset(synthetic_table(lambda t, q, dq, tau: -2e-4 * np.sin(2 * np.pi * q / 0.08)))
+    ripple = lambda s: np.sin(2 * np.pi * s["q"] / 0.08)  # noqa: E731
+    with pytest.raises(IdentificationError, match="coefficient_range"):
+        register_effect("ripple_bad", ripple, coefficient_range=(1.0, 0.0))
+    register_effect("ripple_positive", ripple, signals=("q",), coefficient_range=(0.0, 1.0))
+    register_effect("ripple_negative", ripple, signals=("q",), coefficient_range=(-1.0, 0.0))
+    try:
+        d = diagnose(ds, parse_spec("coulomb", ds.signals), effects=["ripple_positive", "ripple_negative"])
+        assert d.candidate("ripple_positive").heldout_gain == 0.0
+        assert d.candidate("ripple_negative").heldout_gain > 0.9 and d.top.effect == "ripple_negative"
+    finally:
+        unregister_effect("ripple_positive")
+        unregister_effect("ripple_negative")

@@ -312,12 +312,14 @@ def _effect_columns(effect: Effect, signals, ctx: dict, shape, cache: dict) -> n
 def _score_effect(
     ds: Dataset, effect: Effect, bases: list[_FoldBase], loss: Loss, cache: dict
 ) -> tuple[np.ndarray, list[str]]:
-    """Held-out prediction of base + effect (nested shape choice per block), and fit failures."""
+    """Held-out prediction of base + effect (nested shape choice per block), and fit failures. Shapes whose
+    coefficient the effect's physics does not allow (``Effect.coefficient_range``) are not chosen; a block
+    left with none keeps the base model's prediction (the effect adds nothing there)."""
     y = ds.target
     pred = np.full(ds.n, np.nan)
     failures: list[str] = []
     for b in bases:
-        best, best_err = None, np.inf
+        best, best_err, rejected = None, np.inf, False
         for shape in effect.grid_for(ds.signals.with_columns(**b.ctx)):
             try:
                 cols = _effect_columns(effect, ds.signals, b.ctx, shape, cache)
@@ -327,11 +329,16 @@ def _score_effect(
             except IdentificationError as exc:
                 failures.append(str(exc))
                 continue
+            if cols.shape[1] == 1 and not effect.admits(x[-1]):
+                rejected = True  # not this effect: a generic correction of the other sign or size
+                continue
             p = a @ x
             tr = b.fold.train
             err = error_of(y[tr] - p[tr], y[tr], loss)
             if err < best_err:
                 best, best_err = p, err
+        if best is None and rejected:
+            best = b.pred  # no shape with a coefficient the physics allows: the block keeps the base model
         if best is None:
             return pred, failures
         pred[b.fold.test] = best[b.fold.test]

@@ -69,6 +69,9 @@ class Effect:
             evaluated on the current sample alone.
         history: The regressor reads past samples (needs a uniform sampling period).
         confusable: Effects whose columns may look alike on poor data (see ``experiments``).
+        coefficient_range: ``(low, high)``: the coefficients the physics allows (e.g. a fraction); a shape whose
+            fit gives a coefficient outside is not chosen (the term would be a generic correction, not the
+            effect). None: any coefficient.
     """
 
     name: str
@@ -84,6 +87,7 @@ class Effect:
     online: Callable[[Mapping[str, float], float], OnlineTerm] | None = None
     history: bool = False
     confusable: tuple[str, ...] = ()
+    coefficient_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() or self.name in RESERVED:
@@ -100,6 +104,14 @@ class Effect:
             raise IdentificationError(f"effect '{self.name}': family {self.family!r}: expected one of {FAMILIES}")
         if (self.fit_columns is None) != (self.fold is None):
             raise IdentificationError(f"effect '{self.name}': expected both fit_columns and fold, or neither")
+        if self.coefficient_range is not None:
+            low, high = (float(v) for v in self.coefficient_range)
+            if not low < high or self.fit_columns is not None:
+                raise IdentificationError(
+                    f"effect '{self.name}': coefficient_range {self.coefficient_range!r}: expected (low, high) with "
+                    "low < high, for a one-column effect (no fit_columns)"
+                )
+            object.__setattr__(self, "coefficient_range", (low, high))
 
     @property
     def uses_model(self) -> bool:
@@ -124,6 +136,13 @@ class Effect:
             return float(coefs[0]), dict(shape)
         c, full = self.fold(np.asarray(coefs, dtype=np.float64), dict(shape))
         return float(c), {k: float(v) for k, v in full.items()}
+
+    def admits(self, coefficient: float) -> bool:
+        """The fitted ``coefficient`` is one the physics allows (see ``coefficient_range``)."""
+        if self.coefficient_range is None:
+            return True
+        low, high = self.coefficient_range
+        return low <= coefficient <= high
 
     def grid_for(self, signals: Signals) -> tuple[dict[str, float], ...]:
         """The shapes to try on ``signals``."""

@@ -253,6 +253,10 @@ def saturation(s: Signals, tau_sat: float, beta: float, release: float = 0.8) ->
 _SAT_LEVELS = (0.7, 0.8, 0.9, 0.95, 0.97, 0.99)  # quantiles of the proxy: the limit may hold up to 30 % of a log
 _SAT_DAMPING = (0.5, 1.0, 1.5, 2.0)  # beta in units of the data's P99 |tau| / P99 |dq|
 _SAT_RELEASE = 0.8  # leave the limit when the proxy falls below 80 % of it
+SATURATION_COEFFICIENT = (0.0, 1.5)
+"""The part of the command's lead the error keeps past the limit: 1 in theory (0 would be no limit), with a
+margin for a bent fit. Outside it the term is a generic memory correction (fitted -1.5 and -2.0 on simulated
+logs without a limit), not a current limit."""
 
 
 def _saturation_grid(s: Signals) -> tuple[dict[str, float], ...]:
@@ -513,6 +517,7 @@ BUILTIN = (
         "current limit), growing with the command's lead over the joint while it stays there",
         "servo_error", "current limit: past it the servo torque no longer follows the position error, which "
         "integrates the command's lead the servo cannot close", _has_torque, online=_SaturationOnline, history=True,
+        coefficient_range=SATURATION_COEFFICIENT,
     ),
     Effect(
         "elastic", elastic, tuple({"window": w, "lag": lag} for w in (0.011, 0.021, 0.041, 0.081) for lag in _LAGS),

@@ -383,6 +383,10 @@ def _best_shape(signals, target, linear, others: list[Term], effect: str, loss: 
         except IdentificationError as exc:
             failures.append(str(exc))
             continue
+        c = m.coefficients[effect]
+        if not eff.admits(c):
+            failures.append(f"shape {dict(shape)}: coefficient {c:.3g} outside {eff.coefficient_range}")
+            continue
         e = _loss_value(m.predict(signals), target, loss, None)
         if e < err:
             best, err = Term(effect, m.spec.terms[-1].shape), e
