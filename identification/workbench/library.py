@@ -34,7 +34,8 @@ falls below ``release tau_sat``); ``lead = q_des(t - 1 tick) - q(t)``, its chang
 the integral of the command's lead the servo cannot close (the measured error since the onset: the term resets
 the model to the error measured when the limit was reached). ``beta`` [N m s/rad] is the damping outside the
 servo; the proxy reads the signals, not ``u`` (a fit on saturated data bends the model). Simulated knee, 2.5 A
-limit, fast excitation: held-out gain 0.97, fall 0.98, coefficient 0.99 (docs/workbench.md).
+limit, fast excitation: held-out gain 0.97, fall 0.98, coefficient 1.0 (docs/workbench.md); coefficients
+outside ``SATURATION_COEFFICIENT`` are not chosen.
 
 ``a`` is the acceleration ``ddq`` (centred SG of ``q`` over ``window``, or the estimator's), delayed by
 ``lag`` like the torque estimate (see :func:`inertia`).
