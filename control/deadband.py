@@ -80,11 +80,6 @@ def rest_dead_band(dq_err: np.ndarray, tau: np.ndarray, dq: np.ndarray, k_tau: f
                     spread=spread)
 
 
-def dead_band_phi(u: np.ndarray, band: float = BAND) -> np.ndarray:
-    """``clip(u / band, -1, 1)``: the workbench's ``deadzone`` shape with ``damping_share = 0``."""
-    return np.clip(np.asarray(u, dtype=float) / band, -1.0, 1.0)
-
-
 def with_dead_band(model, d: float, band: float = BAND, provenance: str = ""):
     """``model`` (a :class:`~servotau.identification.MotorModel`) with its ``deadzone`` extra term replaced by the
     dead band ``d`` [rad] (shape ``band``, ``damping_share = 0``), first among the extra terms."""

@@ -467,8 +467,7 @@ def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | No
                   **{label: overrides for label, overrides in VARIANTS.items() if label != "paper model"}}
         other_tripped = {}
         for label, overrides in others.items():
-            kwargs = {"posture": posture, **overrides}
-            other = force_run(quick, out, False, kwargs.pop("posture"), **kwargs)
+            other = force_run(quick, out, False, **{"posture": posture, **overrides})
             if other.tripped:
                 other_tripped[label] = other.tripped
             metrics[f"measured, {label}"] = _force_run_metrics(other)["measured"]

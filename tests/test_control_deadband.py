@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from servotau.control.config import JointGains
-from servotau.control.deadband import BAND, dead_band_phi, rest_dead_band, with_dead_band
+from servotau.control.deadband import BAND, rest_dead_band, with_dead_band
 from servotau.control.torque import JointTorqueController
 from servotau.errors import IdentificationError
 from servotau.identification.motor_params import EffectTerm, MotorModel
@@ -58,9 +58,15 @@ def test_with_dead_band_replaces_the_deadzone_term_and_keeps_the_others():
     assert out.extra["coulomb"] == m.extra["coulomb"] and out.k_tau == m.k_tau and out.provenance == "test"
 
 
-def test_dead_band_phi_is_a_sign_smoothed_over_the_band():
-    """phi = clip(u / band, -1, 1): +-1 beyond the band, linear inside."""
-    np.testing.assert_allclose(dead_band_phi(np.array([-1e-3, -BAND / 2, 0.0, BAND, 1e-3])), [-1, -0.5, 0, 1, 1])
+def test_dead_band_term_is_a_sign_smoothed_over_the_band():
+    """At rest the model with the dead band predicts k_tau tau + d clip(u / band, -1, 1), u = k_tau tau: +-d beyond
+    the band, linear inside (the workbench's deadzone term with damping_share 0)."""
+    d = 4e-4
+    m = with_dead_band(MotorModel(k_tau=K_TAU, k_v=0.01, provenance="test"), d)
+    u = np.array([-1e-3, -BAND / 2, 0.0, BAND, 1e-3])
+    tau = u / K_TAU
+    np.testing.assert_allclose(m.predict(tau, np.zeros_like(tau)) - u, d * np.array([-1, -0.5, 0, 1, 1]),
+                               rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize("tau", [10.0, -10.0])

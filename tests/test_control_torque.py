@@ -98,11 +98,16 @@ def _extra_file(tmp_path, text=MOTORS_WITH_EXTRA):
     return path
 
 
+def _knee_controller(tmp_path):
+    """The knee's motor model of MOTORS_WITH_EXTRA and a controller torque-controlling the knee with it."""
+    motors = MotorParameters.load_toml(_extra_file(tmp_path))
+    return motors["RLEG_JOINT3"], JointTorqueController(JOINT_NAMES, motors, {"RLEG_JOINT3": JointGains(k_p=0.5)},
+                                                        1e-3)
+
+
 def test_extra_terms_of_the_motor_file_change_the_command_as_the_model_predicts(tmp_path):
     """With extra terms in the file, dq_err is the model's prediction at (tau*, dq, q, t), tick by tick."""
-    motors = MotorParameters.load_toml(_extra_file(tmp_path))
-    knee = motors["RLEG_JOINT3"]
-    tc = JointTorqueController(JOINT_NAMES, motors, {"RLEG_JOINT3": JointGains(k_p=0.5)}, 1e-3)
+    knee, tc = _knee_controller(tmp_path)
     rng = np.random.default_rng(1)
     ticks = 300
     t = 1e-3 * np.arange(ticks)
@@ -130,9 +135,7 @@ def test_extra_terms_of_the_motor_file_change_the_command_as_the_model_predicts(
 def test_direction_terms_read_dq_sign_and_the_viscous_term_dq_hat(tmp_path):
     """With ``dq_sign`` (velocity_feedforward = "reference_signs"), the extra terms are the model's at dq_sign and
     the viscous term stays K_v dq_hat: dq_err = model(tau*, dq_sign) + K_v (dq_hat - dq_sign)."""
-    motors = MotorParameters.load_toml(_extra_file(tmp_path))
-    knee = motors["RLEG_JOINT3"]
-    tc = JointTorqueController(JOINT_NAMES, motors, {"RLEG_JOINT3": JointGains(k_p=0.5)}, 1e-3)
+    knee, tc = _knee_controller(tmp_path)
     rng = np.random.default_rng(2)
     ticks = 200
     t = 1e-3 * np.arange(ticks)
