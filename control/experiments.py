@@ -63,12 +63,14 @@ FORCE_MAX_DISPLACEMENT = 0.01  # [m] the compatible posture follows the foot up 
 
 POSTURE_TEXT = {
     "start": "the start posture (it fights the force task: the contact is not rigid, see docs/results.md).",
-    "compatible": "compatible with the force task (paper 5.4), control/trajectory.py ForceCompatiblePosture: the "
-                  "start posture during the first period, which also calibrates the contact compliance C (least "
-                  "squares of the foot's displacement J (q_hat - q0) on the measured f_z change, with intercept and "
-                  "trend), then q0 + J^+ C (f_d - f0): the posture the robot takes when the force is the reference, "
-                  "so the position feedback (K6 = 0.1) no longer cancels part of the commanded force; its velocity "
-                  "and acceleration follow df_d/dt.",
+    "compatible": "compatible with the force task (paper 5.4), control/trajectory.py ForceCompatiblePosture: "
+                  "q0 + J^+ C (f_d - f0), the posture the robot takes when the force is the reference, so the "
+                  "position feedback (K6 = 0.1) no longer cancels part of the commanded force; its velocity and "
+                  "acceleration follow df_d/dt. The contact compliance C is the least-squares slope of the foot's "
+                  "displacement J (q_hat - q0) on the measured f_z change (with intercept and trend), calibrated on "
+                  "the first period while the reference follows the measured motion, and refitted on every period: "
+                  "the support leg sticks in its friction at small motions, so C grows with the amplitude (knee 157 "
+                  "urad/N at an 18 N swing, 224 at 31 N). At each fit the reference's step fades out over 0.1 s.",
 }
 
 # Paper, Tables 2 and 3 (rad * 1e3 = mrad); the paper has no hip-yaw row.
@@ -418,7 +420,9 @@ def force_run(quick: bool, out: Path, rerun: bool = False, posture: str = "compa
 
 
 def force_metrics(run: Run, key: str = "f_hat") -> dict:
-    """Overshoot at the positive apexes [% of A], coupling on x and y (max |f - f_d| / A [%]), delay [ms].
+    """Overshoot at the positive apexes [% of A] (the largest, and the apex error of largest magnitude), the error at
+    the negative apexes (troughs, largest magnitude; positive: the force stays above the reference's minimum),
+    coupling on x and y (max |f - f_d| / A [%]), delay [ms].
 
     The first period is skipped (the x/y references jump from the measured force to 0 at the start).
     """
@@ -429,11 +433,12 @@ def force_metrics(run: Run, key: str = "f_hat") -> dict:
     steady = t >= period
     apexes = np.arange(period / 4, t[-1], period)
     apexes = apexes[apexes >= period]
-    over = []
+    over, under = [], []
     for ta in apexes:
-        w = np.abs(t - ta) <= period / 4
-        if w.sum() > 1:
-            over.append(100.0 * (f[w, 2].max() - f_ref[w, 2].max()) / FORCE_AMPLITUDE)
+        for when, out, peak in ((ta, over, np.max), (ta + period / 2, under, np.min)):
+            w = np.abs(t - when) <= period / 4
+            if w.sum() > 1 and when <= t[-1]:
+                out.append(100.0 * (peak(f[w, 2]) - peak(f_ref[w, 2])) / FORCE_AMPLITUDE)
     coupling = [float(100.0 * np.max(np.abs(f[steady, i] - f_ref[steady, i])) / FORCE_AMPLITUDE) for i in (0, 1)]
     x = f[steady, 2] - f[steady, 2].mean()
     y = f_ref[steady, 2] - f_ref[steady, 2].mean()
@@ -441,8 +446,11 @@ def force_metrics(run: Run, key: str = "f_hat") -> dict:
     n = len(x)
     xc = [np.dot(x[max(0, k):n + min(0, k)], y[max(0, -k):n - max(0, k)]) for k in lags]
     amp = 2 * np.sqrt(2) * np.std(x)  # sine amplitude from the RMS
-    return {"overshoot_pct": float(max(over)) if over else float("nan"),
+    worst = max(over, key=abs) if over else float("nan")
+    return {"overshoot_pct": float(max(over)) if over else float("nan"), "apex_error_pct": float(worst),
             "apex_overshoots_pct": [float(v) for v in over],
+            "trough_error_pct": float(max(under, key=abs)) if under else float("nan"),
+            "trough_errors_pct": [float(v) for v in under],
             "coupling_x_pct": coupling[0], "coupling_y_pct": coupling[1],
             "delay_ms": float(1e3 * lags[int(np.argmax(xc))] * dt),
             "amplitude_ratio": float(amp / (2 * FORCE_AMPLITUDE)),
@@ -474,7 +482,8 @@ def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | No
             columns[f"measured, {label}"] = metrics[f"measured, {label}"]
         other_tripped = other_tripped or None
     rows = [[k] + [m[k] if m else float("nan") for m in columns.values()]
-            for k in ("overshoot_pct", "coupling_x_pct", "coupling_y_pct", "delay_ms", "amplitude_ratio",
+            for k in ("overshoot_pct", "apex_error_pct", "trough_error_pct", "coupling_x_pct", "coupling_y_pct",
+                      "delay_ms", "amplitude_ratio",
                       "rms_error_z_N")]
     table = _write_table(out / "force_metrics", ["metric", *columns], rows)
     if len(run.time) > 1:
@@ -701,7 +710,9 @@ def write_results(out: Path, doc: Path) -> str:
                   + POSTURE_TEXT[force.get("posture", "start")]
                   + " F/T offsets are calibrated with the same robot (same seed) hanging, feet free, since the "
                   "feet are loaded in this scenario. Metrics after the first period: overshoot = max over the "
-                  "positive apexes of (peak f_z - peak f_z_ref) / A (negative = undershoot); coupling = max |f - f_d| "
+                  "positive apexes of (peak f_z - peak f_z_ref) / A (negative = undershoot); apex error = the apex's "
+                  "(peak f_z - peak f_z_ref) / A of largest magnitude; trough error = the same at the negative "
+                  "apexes (positive: the force stays above the reference's minimum); coupling = max |f - f_d| "
                   "/ A on x and y; delay = lag of the cross-correlation maximum of f_z vs f_z_ref; amplitude ratio = "
                   "tracked / commanded sine amplitude. 'measured' is the controller's compensated F/T force at the "
                   "sole (what it regulates), 'true' the simulator's total contact force on the right sole (world "
@@ -722,10 +733,11 @@ def write_results(out: Path, doc: Path) -> str:
             parts += [f"Safety trip: {force['tripped']}", ""]
         m = force["metrics"]["measured"]
         if m:
-            ok = abs(m["overshoot_pct"]) <= 5.0
-            parts += [f"Target (apex error within 5 % of A, paper about +10 %): {'PASS' if ok else 'MISSED'} "
-                      f"(measured {m['overshoot_pct']:.1f} %; per apex "
-                      f"{[round(v, 1) for v in m['apex_overshoots_pct']]})."
+            ok = abs(m["apex_error_pct"]) <= 5.0
+            parts += [f"Target (apex error within 5 % of A at every apex, paper about +10 %): "
+                      f"{'PASS' if ok else 'MISSED'} (measured {m['apex_error_pct']:.1f} %; per apex "
+                      f"{[round(v, 1) for v in m['apex_overshoots_pct']]}; at the troughs, not part of the target: "
+                      f"{[round(v, 1) for v in m['trough_errors_pct']]})."
                       " A negative value is an undershoot, which the 'at most 5 % overshoot' wording would let "
                       "pass; it is counted as a miss here. Paper: about 10 % overshoot at the apex, about 10 % "
                       "coupling on x, no significant delay.", ""]

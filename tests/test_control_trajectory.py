@@ -16,7 +16,8 @@ def _jacobian(rng):
 
 
 def test_reference_moves_the_contact_by_the_calibrated_compliance_times_the_force_change():
-    """After calibration, J (q_ref - q0) = C (f_d - f0) with C of the data (drift and other axes ignored)."""
+    """During calibration the reference follows the measured displacement; after it (and the fade of the step),
+    J (q_ref - q0) = C (f_d - f0) with C of the data (drift and other axes ignored)."""
     rng = np.random.default_rng(0)
     jac, q0 = _jacobian(rng), rng.normal(0, 0.5, 12)
     c_z = np.array([1e-5, -2e-5, 4e-5])  # [m/N] displacement per N of f_z
@@ -24,6 +25,7 @@ def test_reference_moves_the_contact_by_the_calibrated_compliance_times_the_forc
     pinv = np.linalg.pinv(jac[:, JOINTS])
     posture = ForceCompatiblePosture(q0, JOINTS, calibration=2.0)
     dt = 1e-3
+    x_before = np.zeros(3)
     for k in range(2001):
         t = k * dt
         f_d = np.array([0.0, 0.0, f0[2] + 40 * np.sin(np.pi * t)])
@@ -32,8 +34,11 @@ def test_reference_moves_the_contact_by_the_calibrated_compliance_times_the_forc
         q_hat = q0.copy()
         q_hat[JOINTS] += pinv @ x
         ref = posture.update(t, q_hat, jac, f_hat, f_d)
-        if posture.compliance is None:
-            np.testing.assert_array_equal(ref.q, q0)  # calibration: the start posture
+        if posture.compliance is None and k > 0:  # calibration: the measured displacement
+            np.testing.assert_allclose(jac @ (ref.q - q0), x, rtol=0, atol=1e-12)
+        if k == 2000:  # the fit: the reference continues from the measured displacement, then fades to C (f_d - f0)
+            np.testing.assert_allclose(jac @ (ref.q - q0), x_before, rtol=0, atol=1e-12)
+        x_before = x
     np.testing.assert_allclose(posture.compliance[:, 2], c_z, rtol=1e-6)
     assert not posture.compliance[:, :2].any()  # axes whose reference does not vary are not regressors
     f_d = np.array([0.0, 0.0, f0[2] + 30.0])
@@ -61,7 +66,7 @@ def test_reference_velocity_and_acceleration_follow_the_force_reference():
         q_hat = q0.copy()
         q_hat[JOINTS] += pinv @ (c_z * (f_d[2] - f0[2]))
         ref = posture.update(t, q_hat, jac, f_d, f_d)
-        if posture.compliance is None or k < 1003:  # calibrating, then one tick without a previous velocity
+        if posture.compliance is None or k < 1002:  # calibrating, then one tick without a previous velocity
             assert not ref.ddq.any()
             continue
         # backward differences: the velocity of half a tick ago, the acceleration of one tick ago
@@ -73,9 +78,33 @@ def test_reference_velocity_and_acceleration_follow_the_force_reference():
     assert not ref.dq[JOINTS].any()
 
 
+def test_compliance_is_refitted_every_calibration_period():
+    """With ``refit``, C is refitted on each period's samples (the support's compliance grows with the amplitude);
+    without it, the first period's C stays."""
+    rng = np.random.default_rng(2)
+    jac, q0 = _jacobian(rng), rng.normal(0, 0.5, 12)
+    pinv = np.linalg.pinv(jac[:, JOINTS])
+    f0 = np.array([0.0, 0.0, 250.0])
+    c_z = {0: np.array([1e-5, -2e-5, 4e-5]), 1: np.array([1.5e-5, -3e-5, 6e-5])}  # [m/N] first, second period
+    postures = {refit: ForceCompatiblePosture(q0, JOINTS, calibration=1.0, refit=refit) for refit in (True, False)}
+    for k in range(2001):
+        t = k * 1e-3
+        f_d = np.array([0.0, 0.0, f0[2] + 40 * np.sin(2 * np.pi * t)])
+        q_hat = q0.copy()
+        q_hat[JOINTS] += pinv @ (c_z[min(int(t), 1)] * (f_d[2] - f0[2]))
+        for posture in postures.values():
+            posture.update(t, q_hat, jac, f_d, f_d)
+    assert postures[True].fits == 2 and postures[False].fits == 1
+    np.testing.assert_allclose(postures[True].compliance[:, 2], c_z[1], rtol=1e-3)
+    np.testing.assert_allclose(postures[False].compliance[:, 2], c_z[0], rtol=1e-3)
+
+
 def test_bad_settings_raise():
-    """A calibration time or a displacement bound that is not > 0 raises ControlError naming it."""
+    """A calibration time or a displacement bound that is not > 0, or a fade that is not >= 0, raises ControlError
+    naming it."""
     with pytest.raises(ControlError, match="calibration"):
         ForceCompatiblePosture(np.zeros(12), JOINTS, calibration=0.0)
     with pytest.raises(ControlError, match="max_displacement"):
         ForceCompatiblePosture(np.zeros(12), JOINTS, calibration=1.0, max_displacement=-1.0)
+    with pytest.raises(ControlError, match="fade"):
+        ForceCompatiblePosture(np.zeros(12), JOINTS, calibration=1.0, fade=float("nan"))

@@ -46,7 +46,8 @@ def test_force_reports_overshoot_coupling_and_delay(outputs):
     assert f["tripped"] is None
     for source in ("measured", "true"):
         metrics = f["metrics"][source]
-        for key in ("overshoot_pct", "coupling_x_pct", "coupling_y_pct", "delay_ms", "amplitude_ratio"):
+        for key in ("overshoot_pct", "apex_error_pct", "trough_error_pct", "coupling_x_pct", "coupling_y_pct",
+                    "delay_ms", "amplitude_ratio"):
             assert np.isfinite(metrics[key]), (source, key)
     assert abs(f["metrics"]["measured"]["delay_ms"]) <= 200.0
     assert (out / "force" / "fig5_force_tracking.png").stat().st_size > 0
