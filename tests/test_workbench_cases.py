@@ -44,11 +44,13 @@ CASES["clean@paper"] = {}  # the clean log diagnosed from the paper's model alon
 CASES["stribeck@out_of_grid"] = {"stribeck": {"tau_s": 6.0, "v_s": 0.6}}
 CASES["stribeck@in_grid"] = {"stribeck": {"tau_s": 6.0, "v_s": 0.16}}
 FAST = {"slow_amp": (0.45, 0.55), "fast_amp": (0.08, 0.12)}  # [rad] ExcitationPlan amplitudes
-# A current limit (2.5 A, 47.5 N m at the knee) shows while moving only where the command asks for more torque
-# than the motor has: with the default sines it is reached while moving in one cycle only (cycle 3, by the
+PLAN_OF = {"stribeck@out_of_grid": FAST, "stribeck@in_grid": FAST}
+# The excitation a hidden effect needs to be testable by held-out blocks; every log hiding it, alone or in a pair,
+# runs it. A current limit (2.5 A, 47.5 N m at the knee) shows while moving only where the command asks for more
+# torque than the motor has: with the default sines it is reached while moving in one cycle only (cycle 3, by the
 # amplitude draws), so that held-out block is predicted from blocks that never saturate while moving, and the
-# others hold nothing to test. The same fast excitation reaches it while moving in every cycle, in both directions.
-PLAN_OF = {"stribeck@out_of_grid": FAST, "stribeck@in_grid": FAST, "saturation": FAST}
+# others hold nothing to test. The fast excitation reaches it while moving in every cycle, in both directions.
+EXCITATION_OF = {"saturation": FAST}
 # The experiment separating backlash from elastic: the same logs with a link-side angle sensor.
 CASES["backlash@link"] = {"backlash": {}}
 CASES["elastic@link"] = {"elastic": {}}
@@ -76,8 +78,15 @@ def _source_key() -> str:
     return h.hexdigest()[:16]
 
 
+def plan_of(name: str, hidden: dict) -> dict:
+    """ExcitationPlan amplitudes of a case: its own, else those a hidden effect needs (:data:`EXCITATION_OF`)."""
+    if name in PLAN_OF:
+        return PLAN_OF[name]
+    return next((EXCITATION_OF[e] for e in hidden if e in EXCITATION_OF), {})
+
+
 def _path(name: str, key: str, hidden: dict) -> Path:
-    case = hashlib.sha256(repr((sorted(hidden.items()), sorted(PLAN_OF.get(name, {}).items()))).encode())
+    case = hashlib.sha256(repr((sorted(hidden.items()), sorted(plan_of(name, hidden).items()))).encode())
     return _CACHE_DIR / f"{name}-{key}-{case.hexdigest()[:8]}.npz"
 
 
@@ -90,7 +99,7 @@ def _load_or_simulate(name: str, key: str, hidden: dict | None = None) -> dict[s
     if p.exists():
         with np.load(p) as z:
             return {k.replace("__", "/"): z[k] for k in z.files}
-    cols = simulate_log(hidden or None, seed=0, plan=ExcitationPlan(cycle_s=CYCLE_S, **PLAN_OF.get(name, {})))
+    cols = simulate_log(hidden or None, seed=0, plan=ExcitationPlan(cycle_s=CYCLE_S, **plan_of(name, hidden)))
     try:
         _CACHE_DIR.mkdir(parents=True, exist_ok=True)
         tmp = p.with_suffix(f".{os.getpid()}.npz")

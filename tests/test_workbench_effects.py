@@ -120,7 +120,8 @@ def test_confusable_runner_up_comes_with_the_separating_experiment():
 @pytest.mark.slow
 def test_every_pair_of_hidden_effects():
     """All 55 pairs (``make experiments``): the greedy ladder's first step adds one of the two hidden effects
-    (or a documented confusable one) in most pairs; the table is written for the report."""
+    (or a documented confusable one) in every pair (55/55 measured; logs hiding a current limit run the fast
+    excitation, see ``EXCITATION_OF``); the table is written for the report."""
     pairs = list(itertools.combinations(SINGLE, 2))
     results = run_pairs(pairs)
     _CACHE_DIR.mkdir(parents=True, exist_ok=True)
@@ -128,5 +129,11 @@ def test_every_pair_of_hidden_effects():
     first_ok = [o for o, p in zip(results, pairs, strict=True)
                 if o["added"] and (o["added"][0] in p or any(_confusable(o["added"][0], e) for e in p))]
     both = [o for o, p in zip(results, pairs, strict=True) if set(p) <= set(o["added"])]
-    print(f"\nfirst step right in {len(first_ok)}/{len(pairs)} pairs, both added in {len(both)}/{len(pairs)}")
-    assert len(first_ok) >= 0.8 * len(pairs)
+    both_elastic = [o for o, p in zip(results, pairs, strict=True)
+                    if all(e in o["added"] or (e == "backlash" and "elastic" in o["added"]) for e in p)]
+    # an added effect that is neither hidden nor documented as confusable with a hidden one
+    false = [(o["name"], a) for o, p in zip(results, pairs, strict=True) for a in o["added"]
+             if a not in p and not any(_confusable(a, e) for e in p)]
+    print(f"\nfirst step right in {len(first_ok)}/{len(pairs)} pairs, both added in {len(both)}/{len(pairs)} "
+          f"({len(both_elastic)} counting elastic for backlash), {len(false)} false additions: {false}")
+    assert len(first_ok) == len(pairs), [o["name"] for o in results if o not in first_ok]
