@@ -97,7 +97,7 @@ class ForceCompatiblePosture:
     the amplitude (the support leg's joints stick in their friction at small motions). Measured on the simulated
     robot (right foot on the block, 40 N sine): 157 urad of knee per N at an 18 N swing, 224 at 31 N; calibrated
     against a fixed reference the force reached only the smaller swing and the apex fell 13 % short
-    (docs/results.md). The measured motion lags the force, so at a fit the reference would step from the old
+    (docs/control.md). The measured motion lags the force, so at a fit the reference would step from the old
     displacement to the new ``C (f_d - f0)``; the step fades out linearly over ``fade`` seconds (bumpless: a
     step of a few mrad at K6 = 0.1 puts a 50 % spike on the contact force).
 
@@ -121,7 +121,8 @@ class ForceCompatiblePosture:
             calibration: [s] > 0 of data (from the first update on) to estimate ``C``; the force must vary then.
                 A period of the force reference is a good choice.
             max_displacement: [m] > 0: largest task-space displacement of the reference, per axis.
-            refit: Refit ``C`` every ``calibration`` seconds on the samples since the last fit.
+            refit: Refit ``C`` every ``calibration`` seconds on the samples since the last fit (kept as it is
+                when the force reference did not vary since).
             fade: [s] >= 0: the reference's step at a fit fades out over this time (0: no fade).
         """
         for name, v in (("calibration", calibration), ("max_displacement", max_displacement)):
@@ -214,6 +215,8 @@ class ForceCompatiblePosture:
         df = np.array([s[2] for s in self._samples])
         axes = self._varied_axes()
         self._samples, self._f_d_range = [], None
+        if not axes.size and self.compliance is not None:
+            return self.compliance  # nothing varied: nothing to learn
         c = np.zeros((x.shape[1], df.shape[1]))
         if axes.size:
             a = np.column_stack([df[:, axes], np.ones_like(t), t])

@@ -79,22 +79,22 @@ def test_reference_velocity_and_acceleration_follow_the_force_reference():
 
 
 def test_compliance_is_refitted_every_calibration_period():
-    """With ``refit``, C is refitted on each period's samples (the support's compliance grows with the amplitude);
-    without it, the first period's C stays."""
+    """With ``refit``, C is refitted on each period's samples (the support's compliance grows with the amplitude) and
+    kept through a period where the force reference holds still; without it, the first period's C stays."""
     rng = np.random.default_rng(2)
     jac, q0 = _jacobian(rng), rng.normal(0, 0.5, 12)
     pinv = np.linalg.pinv(jac[:, JOINTS])
     f0 = np.array([0.0, 0.0, 250.0])
     c_z = {0: np.array([1e-5, -2e-5, 4e-5]), 1: np.array([1.5e-5, -3e-5, 6e-5])}  # [m/N] first, second period
     postures = {refit: ForceCompatiblePosture(q0, JOINTS, calibration=1.0, refit=refit) for refit in (True, False)}
-    for k in range(2001):
+    for k in range(3001):
         t = k * 1e-3
-        f_d = np.array([0.0, 0.0, f0[2] + 40 * np.sin(2 * np.pi * t)])
+        f_d = np.array([0.0, 0.0, f0[2] + 40 * np.sin(2 * np.pi * min(t, 2.0))])  # holds still after 2 s
         q_hat = q0.copy()
         q_hat[JOINTS] += pinv @ (c_z[min(int(t), 1)] * (f_d[2] - f0[2]))
         for posture in postures.values():
             posture.update(t, q_hat, jac, f_d, f_d)
-    assert postures[True].fits == 2 and postures[False].fits == 1
+    assert postures[True].fits == 3 and postures[False].fits == 1
     np.testing.assert_allclose(postures[True].compliance[:, 2], c_z[1], rtol=1e-3)
     np.testing.assert_allclose(postures[False].compliance[:, 2], c_z[0], rtol=1e-3)
 
