@@ -86,3 +86,26 @@ def test_cli_runs_an_experiment_and_writes_the_document(tmp_path, capsys):
     assert "RMS / peak" in capsys.readouterr().out
     text = doc.read_text()
     assert "## Torque estimation" in text and "Not run." in text  # the others were not run in this directory
+
+
+def test_force_metrics_report_the_worst_apex_and_the_troughs():
+    """On a synthetic run: overshoot is the largest apex error, apex_error the one of largest magnitude (an
+    undershoot counts), trough_error the same at the negative apexes; the first period is not evaluated."""
+    dt, period, a = 1e-3, 1.0 / ex.FORCE_FREQUENCY, ex.FORCE_AMPLITUDE
+    run = ex.Run("synthetic")
+    apex_scale = {1: 0.90, 2: 1.02}  # positive half-waves of periods 1 and 2: -10 %, +2 % of A
+    trough_scale = {1: 0.80, 2: 0.95}  # negative half-waves: the force stays 20 %, 5 % of A above the minimum
+    for k in range(int(round(3 * period / dt))):
+        t = k * dt
+        s = np.sin(2 * np.pi * ex.FORCE_FREQUENCY * t)
+        p = int(t // period)
+        scale = (apex_scale if s >= 0 else trough_scale).get(p, 1.0)
+        run.time.append(t)
+        run.f_ref.append(np.array([0.0, 0.0, 300.0 + a * s]))
+        run.f_hat.append(np.array([0.0, 0.0, 300.0 + scale * a * s]))
+    m = ex.force_metrics(run)
+    np.testing.assert_allclose(m["apex_overshoots_pct"], [-10.0, 2.0], atol=1e-6)
+    assert m["overshoot_pct"] == pytest.approx(2.0, abs=1e-6)
+    assert m["apex_error_pct"] == pytest.approx(-10.0, abs=1e-6)
+    np.testing.assert_allclose(m["trough_errors_pct"], [20.0, 5.0], atol=1e-6)
+    assert m["trough_error_pct"] == pytest.approx(20.0, abs=1e-6)
