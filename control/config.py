@@ -55,9 +55,12 @@ class JointGains:
     k_d: float = 0.0  # [N m s/rad] velocity damping
     k_i: float = 0.0  # [1/s] torque integral gain (paper: 0)
     integral_limit: float = 10.0  # [N m] anti-windup clamp of |k_i * integral(e_tau)|
+    k_iq: float = 0.0  # [1/s] position-integral rate, 1 / integral time (not in the paper; position_integral.py)
+    position_integral_limit: float = 0.001  # [rad] clamp of the position integral
 
     def __post_init__(self):
-        units = {"k_p": "-", "k_s": "N m/rad", "k_d": "N m s/rad", "k_i": "1/s", "integral_limit": "N m"}
+        units = {"k_p": "-", "k_s": "N m/rad", "k_d": "N m s/rad", "k_i": "1/s", "integral_limit": "N m",
+                 "k_iq": "1/s", "position_integral_limit": "rad"}
         for name, unit in units.items():
             value = _finite(f"JointGains.{name}", getattr(self, name), lambda v: v >= 0,
                             f"a finite number >= 0 [{unit}]")
@@ -145,6 +148,7 @@ class ControlConfig:
     sign_velocity: float = 0.01  # [rad/s] Coulomb sign smoothing: k_c tanh(dq / sign_velocity)
     fade_time: float = 0.5  # [s] the bumpless-switch offset fades to zero over this time
     velocity_feedforward: str = "estimate"  # velocity of the motor-model feedforward (VELOCITY_FEEDFORWARDS)
+    rest_velocity: float = 0.001  # [rad/s] the position integral runs on a joint while |dq_d| < rest_velocity
     source: str = "<direct>"  # file the config came from
     _torque_mask: np.ndarray = field(default=None, repr=False, compare=False)
 
@@ -186,6 +190,8 @@ class ControlConfig:
                                                           "a finite number > 0 [rad/s]"))
         object.__setattr__(self, "fade_time", _finite("fade_time", self.fade_time, lambda v: v >= 0,
                                                       "a finite number >= 0 [s]"))
+        object.__setattr__(self, "rest_velocity", _finite("rest_velocity", self.rest_velocity, lambda v: v > 0,
+                                                          "a finite number > 0 [rad/s]"))
         mask = np.array([j in gains for j in names])
         mask.setflags(write=False)
         object.__setattr__(self, "_torque_mask", mask)
@@ -227,7 +233,7 @@ class ControlConfig:
     @classmethod
     def from_section(cls, root: Section, info: RobotInfo) -> ControlConfig:
         root.check_keys(["version", "motors", "base", "contacts", "sign_velocity", "fade_time", "velocity_feedforward",
-                         "torque_joints", "defaults", "joints", "force", "safety"])
+                         "rest_velocity", "torque_joints", "defaults", "joints", "force", "safety"])
         version = root.int("version")
         if version != FORMAT_VERSION:
             raise root.error("version", version, f"{FORMAT_VERSION}")
@@ -252,7 +258,8 @@ class ControlConfig:
             raise root.error("torque_joints", torque_joints, "distinct joint names")
 
         defaults = root.section("defaults", {})
-        gain_keys = ["k_p", "k_i", "integral_limit", "k6", "k_s", "k7", "k_d", "k7_scaling"]
+        gain_keys = ["k_p", "k_i", "integral_limit", "k_iq", "position_integral_limit", "k6", "k_s", "k7", "k_d",
+                     "k7_scaling"]
         defaults.check_keys(gain_keys)
         joints = root.section("joints", {})
         for j in joints.keys():
@@ -299,6 +306,7 @@ class ControlConfig:
             sign_velocity=root.float("sign_velocity", 0.01, min=0.0, strict_min=True, unit="rad/s"),
             fade_time=root.float("fade_time", 0.5, min=0.0, unit="s"),
             velocity_feedforward=root.str("velocity_feedforward", "estimate", choices=VELOCITY_FEEDFORWARDS),
+            rest_velocity=root.float("rest_velocity", 0.001, min=0.0, strict_min=True, unit="rad/s"),
             source=root.file,
         )
 
@@ -376,6 +384,8 @@ def _joint_gains(own: Section, defaults: Section, k_tau: float) -> JointGains:
         k_d=k_d,
         k_i=value("k_i", 0.0, "1/s"),
         integral_limit=value("integral_limit", 10.0, "N m"),
+        k_iq=value("k_iq", 0.0, "1/s"),
+        position_integral_limit=value("position_integral_limit", 0.001, "rad"),
     )
 
 

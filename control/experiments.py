@@ -32,7 +32,7 @@ LEG = tuple(f"RLEG_JOINT{i}" for i in range(6))
 LEG_LABELS = ("hip yaw", "hip roll", "hip pitch", "knee", "ankle pitch", "ankle roll")
 K6_VALUES = (1.0, 0.5, 0.25, 0.1)
 PAPER_COMPONENTS = ("ff_torque", "ff_friction", "fb_position", "fb_velocity", "fb_acceleration", "fb_force")
-OTHER_COMPONENTS = ("ff_extra", "fb_torque_residual", "fb_integral", "switch_offset")
+OTHER_COMPONENTS = ("ff_extra", "fb_torque_residual", "fb_integral", "fb_position_integral", "switch_offset")
 
 # (K6, k7 [s]) runs beside the sweep with a constant velocity gain (k7_scaling = "constant"): the config's k7 at
 # K6 = 1, i.e. the sweep before the velocity gain followed K6
@@ -43,6 +43,7 @@ PAPER_MODEL = "motors/hrp2_sim_identified.toml"  # the paper's motor model (k_ta
 VARIANTS = {"workbench model": {"motors": WORKBENCH_MODEL}, "paper model": {"motors": PAPER_MODEL},
             "ff=estimate": {"velocity_feedforward": "estimate"}}
 VARIANT_K6 = (1.0, 0.25)
+NO_POSITION_INTEGRAL_K6 = (1.0, 0.1)  # runs with k_iq = 0 (the paper's law): what the position integral adds
 SETTLE = 0.5  # [s] position mode, holding the start posture; F/T offsets calibrated here
 HOLD = 1.0  # [s] in the experiment's mode before the motion (the mode switch offset fades in 0.5 s)
 TAIL = 0.5  # [s] after the swing, still evaluated
@@ -115,9 +116,10 @@ class Run:
 
 
 def _control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: float | None = None,
-                    motors: str | None = None, velocity_feedforward: str | None = None):
-    """config/control.toml with every torque joint at ``k6`` (and ``k7`` [s] if given), the motor file ``motors``
-    and the ``velocity_feedforward`` if given and, with ``force_axes``, the paper's force task on those axes."""
+                    motors: str | None = None, velocity_feedforward: str | None = None, k_iq: float | None = None):
+    """config/control.toml with every torque joint at ``k6`` (and ``k7`` [s], ``k_iq`` [1/s] if given), the motor
+    file ``motors`` and the ``velocity_feedforward`` if given and, with ``force_axes``, the paper's force task on
+    those axes."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
 
@@ -135,6 +137,10 @@ def _control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: flo
         for joint in data.get("joints", {}).values():
             for key in ("k7", "k_d", "k7_scaling"):
                 joint.pop(key, None)
+    if k_iq is not None:
+        data["defaults"]["k_iq"] = k_iq
+        for joint in data.get("joints", {}).values():
+            joint.pop("k_iq", None)
     if motors is not None:
         data["motors"] = motors
     if velocity_feedforward is not None:
@@ -171,7 +177,7 @@ def _ft_offsets_hanging(seed: int, est_cfg) -> np.ndarray:
 def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: float | None = 1.0,
              swing: float | None = SWING, force_profile=None, duration: float | None = None, seed: int = SEED,
              rerun: str | None = None, posture: str = "compatible", k7: float | None = None,
-             motors: str | None = None, velocity_feedforward: str | None = None,
+             motors: str | None = None, velocity_feedforward: str | None = None, k_iq: float | None = None,
              force_axes: tuple[str, ...] = FORCE_AXES) -> Run:
     """One run: settle in position mode, switch to ``mode``, hold ``HOLD`` s, then the motion or force task.
 
@@ -190,6 +196,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
         motors: Motor-parameter file relative to config/ (None: the config's).
         velocity_feedforward: ``estimate`` or ``reference`` velocity in the motor-model feedforward (None: the
             config's).
+        k_iq: Position-integral rate [1/s] of the torque joints (None: the config's; 0: off).
         force_axes: Regulated axes of the force task.
         posture: With a force task, the joint reference: ``compatible`` follows the measured motion along the
             task directions (:class:`~servotau.control.trajectory.ForceCompatiblePosture`, paper 5.4), ``start``
@@ -207,7 +214,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     est_cfg = EstimatorConfig.from_toml(variant="low_delay")
     estimator = TorqueEstimator(info, est_cfg)
     manager = ControlManager(info, _control_config(info, k6, force_axes if force_profile is not None else (), k7,
-                                                  motors, velocity_feedforward))
+                                                  motors, velocity_feedforward, k_iq))
     stream = None
     if rerun:
         from servotau.viewer import RerunStream, open_recording
@@ -345,6 +352,9 @@ def motion_runs(quick: bool, out: Path, rerun: bool = False) -> dict[str, Run]:
     for k6, k7 in (() if quick else MOTION_EXTRA):
         name = f"{_label(k6)} k7={k7:g}"
         runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, k7=k7)
+    for k6 in (() if quick else NO_POSITION_INTEGRAL_K6):
+        name = f"{_label(k6)} k_iq=0"
+        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, k_iq=0.0)
     for label, overrides in ({} if quick else VARIANTS).items():
         for k6 in VARIANT_K6:
             name = f"{_label(k6)} {label}"
@@ -536,7 +546,7 @@ def run_components(out: Path, quick: bool = False, rerun: bool = False, runs: di
         runs = {"motion K6=1": simulate("motion-K6=1", k6=1.0), "motion K6=0.1": simulate("motion-K6=0.1", k6=0.1),
                 "force": force_run(quick, out, rerun)}
     shares = {name: component_shares(r) for name, r in runs.items()}
-    header = ["experiment", "joint"] + list(PAPER_COMPONENTS) + ["dominant", "ff_extra", "(residual+integral+switch)"]
+    header = ["experiment", "joint"] + list(PAPER_COMPONENTS) + ["dominant", "ff_extra", "(residual+integrals+switch)"]
     rows, dominant = [], {}
     for name, sh in shares.items():
         for j, label in enumerate(LEG_LABELS):
@@ -632,7 +642,8 @@ def write_results(out: Path, doc: Path) -> str:
              "GENERATED by `servotau experiment motion|force|components|estimation` (control/experiments.py) from "
              f"the run outputs under `{shown}`; do not edit by hand. Deterministic: in-process lock-step backend, "
              f"seed {SEED}, estimator variant `low_delay`, config/control.toml (k_p = 0.5, k7 = 0.001 s / sqrt(K6), "
-             "`k7_scaling = \"inverse_sqrt_k6\"`) with the K6 of each run. Every run: 0.5 s in position mode (F/T "
+             "`k7_scaling = \"inverse_sqrt_k6\"`, position integral k_iq = 2 /s while the reference rests) with the K6 "
+             "of each run. Every run: 0.5 s in position mode (F/T "
              "offsets calibrated), switch to the run's mode, "
              f"{HOLD:g} s hold (the switch offset fades out), then the task.",
              ""]
@@ -646,11 +657,12 @@ def write_results(out: Path, doc: Path) -> str:
                   f"`config/{motion.get('motors', '?')}`. Columns with a suffix change one thing from the config: "
                   f"'paper model' the paper's k_tau, k_v alone (`config/{PAPER_MODEL}`); 'workbench model' the "
                   f"workbench's model without the servo's dead band measured on the holds (`config/{WORKBENCH_MODEL}`; "
-                  "control/deadband.py adds it: a feedforward d clip(u / band, -1, 1) in the direction of the "
+                  "identification/deadband.py adds it: a feedforward d clip(u / band, -1, 1) in the direction of the "
                   "predicted command u); 'ff=estimate' the paper's dq_hat in every term of the motor-model "
                   "feedforward (the config reads the direction of motion of the Coulomb and extra terms from the "
                   "reference, `velocity_feedforward = \"reference_signs\"`); 'k7=' a constant velocity gain [s] "
-                  "instead of the config's k7 / sqrt(K6)."
+                  "instead of the config's k7 / sqrt(K6); 'k_iq=0' without the position integral (the paper's law; "
+                  "the config integrates e_q while a joint's reference rests, control/position_integral.py)."
                   + (" QUICK run (reduced K6 set)." if motion["quick"] else ""), "",
                   "RMS error sqrt(mean((q_d - q)^2)) [mrad]:", "", motion["tables"]["mean"], "",
                   "Max error max |q_d - q| [mrad]:", "", motion["tables"]["max"], ""]
@@ -674,7 +686,8 @@ def write_results(out: Path, doc: Path) -> str:
                 continue
             fails = [j for j, v in p.items() if not all(v[k] for k in keys)]
             trip = " (the run TRIPPED)" if motion["tripped"].get(name) else ""
-            parts += [f"Target beyond the paper, with the motor model of `{motion.get('motors', '?')}`: {name} {what}: "
+            parts += [f"Target beyond the paper, with the motor model of `{motion.get('motors', '?')}` and the "
+                      f"position integral: {name} {what}: "
                       f"{'PASS' if not fails and not trip else 'MISSED'}{trip}"
                       + (f" (fails: {fails})" if fails else "") + ".", ""]
             for other in (n for n in motion["beats_position"]

@@ -13,6 +13,7 @@ With ``b = M ddq + h``, ``tau_m = b_hat - J^T f_hat`` (the model's torque for th
                - K_tau (K_p J^T e_f + (1 + K_p) J^T K_f e_f)    fb_force         (K9 e_f)
                - K_tau K_p r                                    fb_torque_residual
                + K_tau K_i integral(e_tau)                      fb_integral
+               + K_tau (1 + K_p) tau_iq                         fb_position_integral (not in the paper)
 
 which is exact (not an approximation): the components always sum to the command ``dq_err``.
 
@@ -22,6 +23,9 @@ estimator's noise and delay (then ``K_v (dq_d - dq_hat)``, the servo's own dampi
 besides K7); ``reference_signs`` keeps the paper's ``K_v dq_hat`` and takes from ``dq_d`` only the direction of
 motion that the Coulomb and extra terms switch on (a noisy, delayed ``dq_hat`` flips them at rest). The feedback
 terms always read the estimates.
+
+``tau_d`` is eq. 12 plus ``tau_iq``, the integral of the position error while the reference is at rest, kept out
+of the force task's directions (control/position_integral.py; 0 unless a joint has ``k_iq`` > 0).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import numpy as np
 from .config import ControlConfig
 from .dynamics import BaseState
 from .inverse_dynamics import InverseDynamics
+from .position_integral import PositionIntegral
 from .terms import TORQUE_COMPONENTS, ControlTerms
 from .torque import JointTorqueController
 
@@ -42,6 +47,9 @@ class TorqueControlLaw:
         self.config = config
         self.inverse_dynamics = InverseDynamics.from_config(config, model_path)
         self.torque = JointTorqueController.from_config(config, period)
+        self.position_integral = PositionIntegral(self.inverse_dynamics.k_s, config.joint_vector("k_iq"),
+                                                  config.joint_vector("position_integral_limit"),
+                                                  config.rest_velocity, period)
         tc = self.torque
         self.k6 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_s  # [-]
         self.k7 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_d  # [s]
@@ -58,8 +66,9 @@ class TorqueControlLaw:
         return ControlTerms(len(self.config.joint_names), shared)
 
     def reset(self) -> None:
-        """Empty the torque integral (on entering torque mode)."""
+        """Empty the torque and position integrals (on entering torque mode)."""
         self.torque.reset()
+        self.position_integral.reset()
 
     def update(self, terms: ControlTerms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, wrenches=None,
                base: BaseState | None = None) -> np.ndarray:
@@ -67,6 +76,9 @@ class TorqueControlLaw:
         ``dq_err`` (n,) [rad]."""
         idc, tc, t, tmp = self.inverse_dynamics, self.torque, terms, self._tmp
         tau_d = idc.update(q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, wrenches, base)
+        pint = self.position_integral
+        if pint.active:
+            tau_d += pint.update(idc.e_q, dq_d, idc.task_jacobian)
         dq_ff = dq_d if self._ff_velocity == "reference" else dq_hat
         dq_sign = dq_d if self._ff_velocity == "reference_signs" else None
         dq_err = tc.update(tau_d, tau_hat, dq_ff, q_hat, ddq_hat, t.time, dq_sign)
@@ -87,6 +99,8 @@ class TorqueControlLaw:
         np.multiply(self._kt_kp, tmp, out=t.fb_torque_residual)
         if tc.has_integral:
             np.multiply(tc.k_tau, tc.integral_term, out=t.fb_integral)
+        if pint.active:
+            np.multiply(self._kt_1kp, pint.tau, out=t.fb_position_integral)
         np.copyto(t.tau_hat, tau_hat)
         return dq_err
 

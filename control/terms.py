@@ -3,7 +3,8 @@
 The command splits into the components of the paper's section 5.5 (all in [rad] of ``dq_err``)::
 
     dq_err = q_des - q = ff_torque + ff_friction + ff_extra + fb_position + fb_velocity + fb_acceleration
-                         + fb_force + fb_torque_residual + fb_integral + position_command + switch_offset
+                         + fb_force + fb_torque_residual + fb_integral + fb_position_integral + position_command
+                         + switch_offset
 
 - ``ff_torque``          K_tau (M ddq_d + h - J^T f_d)  (contacts not regulated: their measured wrench)
 - ``ff_friction``        K_v dq_ff + k_c tanh(dq_s / v_s), dq_ff = dq_hat (the paper) or dq_d, dq_s = dq_ff or
@@ -17,6 +18,8 @@ The command splits into the components of the paper's section 5.5 (all in [rad] 
 - ``fb_torque_residual`` -K_tau K_p (tau_hat - (M ddq_hat + h - J^T f_hat)): the part of the torque feedback
   not explained by the model (0 when the estimator's torque is the model's, as the paper assumes)
 - ``fb_integral``        K_tau K_i integral(e_tau)
+- ``fb_position_integral`` K_tau (1 + K_p) tau_iq, the conditional position integral (control/position_integral.py;
+  not in the paper)
 - ``position_command``   q_ref - q on position-controlled joints (every joint in position mode), q_hold - q in hold
 - ``switch_offset``      the fading offset of a bumpless mode switch
 
@@ -39,13 +42,14 @@ COMPONENTS: tuple[str, ...] = (
     "fb_force",
     "fb_torque_residual",
     "fb_integral",
+    "fb_position_integral",
     "position_command",
     "switch_offset",
 )
 """Components of the command, each (n,) [rad]; they sum to ``dq_err``."""
 
-TORQUE_COMPONENTS: tuple[str, ...] = COMPONENTS[:9]
-"""The components of the torque law (eq. 13-14 plus extra motor-model terms, residual and integral)."""
+TORQUE_COMPONENTS: tuple[str, ...] = COMPONENTS[:10]
+"""The components of the torque law (eq. 13-14 plus extra motor-model terms, residual and integrals)."""
 
 SIGNALS: tuple[str, ...] = ("q_des", "dq_err", "tau_d", "tau_star", "tau_hat", "e_tau", "e_q", "de_q", "dde_q")
 """Other joint signals, each (n,): [rad], [rad], [N m] x 4, [rad], [rad/s], [rad/s^2]."""

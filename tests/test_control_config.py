@@ -44,6 +44,8 @@ def test_shipped_config_loads_with_k6_converted_to_stiffness():
     assert g.k_s == pytest.approx(k6 / (K_TAU["RLEG_JOINT3"] * (1.0 + g.k_p)))
     assert cfg.joint_vector("k_s")[6:].tolist() == [0.0] * 24
     assert cfg.motor_vector("k_tau")[3] == K_TAU["RLEG_JOINT3"]
+    assert cfg.joint_vector("k_iq")[:6].tolist() == [BASE["defaults"]["k_iq"]] * 6  # the position integral is on
+    assert cfg.joint_vector("k_iq")[6:].tolist() == [0.0] * 24 and cfg.rest_velocity == BASE["rest_velocity"]
 
 
 def test_joint_table_overrides_defaults_in_either_unit():
@@ -76,6 +78,10 @@ def test_k7_scaling_divides_the_velocity_gain_by_sqrt_k6():
     ("defaults.k_p", -2.0, "defaults.k_p", ">= 0"),
     ("defaults.k6", math.nan, "defaults.k6", "finite"),
     ("defaults.k_i", "high", "defaults.k_i", "finite number"),
+    ("defaults.k_iq", -2.0, "defaults.k_iq", ">= 0"),
+    ("joints", {"RLEG_JOINT0": {"position_integral_limit": math.nan}}, "joints.RLEG_JOINT0.position_integral_limit",
+     "finite"),
+    ("rest_velocity", 0.0, "rest_velocity", "> 0"),
     ("joints", {"RLEG_JOINT3": {"k_d": -1.0}}, "joints.RLEG_JOINT3.k_d", ">= 0"),
     ("joints", {"RLEG_JOINT3": {"k6": 1.0, "k_s": 10.0}}, "joints.RLEG_JOINT3.k_s", "either k6 or k_s"),
     ("joints", {"LARM_JOINT0": {}}, "joints.LARM_JOINT0", "torque_joints"),
@@ -110,6 +116,8 @@ def test_bad_field_names_the_field_and_the_expected_value(path, value, field, ex
 @pytest.mark.parametrize("build, field", [
     (lambda: JointGains(k_p=-1.0), "JointGains.k_p"),
     (lambda: JointGains(k_s=float("nan")), "JointGains.k_s"),
+    (lambda: JointGains(k_iq=-1.0), "JointGains.k_iq"),
+    (lambda: ControlConfig(JOINT_NAMES, {}, {}, SafetyLimits.uniform(30), rest_velocity=-1e-3), "rest_velocity"),
     (lambda: ForceTask(axes=("fz",), k_f=(1.0, 2.0)), "ForceTask.k_f"),
     (lambda: ForceTask(sensor="nose"), "ForceTask.sensor"),
     (lambda: SafetyLimits.uniform(30, max_torque=0.0), "SafetyLimits.max_torque"),

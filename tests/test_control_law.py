@@ -13,9 +13,9 @@ from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH, default_joint_map, 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]
 
 
-def _config(force=True, k_i=0.0, velocity_feedforward="estimate"):
+def _config(force=True, k_i=0.0, velocity_feedforward="estimate", k_iq=0.0):
     motors = MotorParameters.load_toml(CONFIG_DIR / "motors" / "example.toml")
-    gains = {j: JointGains(k_p=2.0, k_s=500.0 + 100 * i, k_d=5.0 + i, k_i=k_i, integral_limit=3.0)
+    gains = {j: JointGains(k_p=2.0, k_s=500.0 + 100 * i, k_d=5.0 + i, k_i=k_i, integral_limit=3.0, k_iq=k_iq)
              for i, j in enumerate(LEG)}
     task = ForceTask("right_ankle", "ft_right_ankle", axes=("fx", "fz", "ty"), k_f=(0.5, 1.0, 0.2)) if force else None
     return ControlConfig(JOINT_NAMES, gains, motors, SafetyLimits.uniform(30), contacts=("right_ankle",), force=task,
@@ -32,12 +32,14 @@ def _inputs(seed=0):
     return q_hat, dq_hat, ddq_hat, q, rng.normal(0, 0.3, 30), rng.normal(0, 3, 30), w, rng
 
 
-@pytest.mark.parametrize("force, k_i", [(True, 0.0), (False, 0.0), (True, 5.0)])
-def test_components_sum_to_the_command(force, k_i):
-    """ff_torque + ff_friction + fb_* (+ residual, integral) equals dq_err exactly, with and without force task."""
-    law = TorqueControlLaw(_config(force, k_i), str(MODEL_PATH), 1e-3)
+@pytest.mark.parametrize("force, k_i, k_iq", [(True, 0.0, 0.0), (False, 0.0, 0.0), (True, 5.0, 0.0), (True, 0.0, 50.0),
+                                             (False, 0.0, 50.0)])
+def test_components_sum_to_the_command(force, k_i, k_iq):
+    """ff_torque + ff_friction + fb_* (+ residual, integrals) equals dq_err exactly, with and without force task."""
+    law = TorqueControlLaw(_config(force, k_i, k_iq=k_iq), str(MODEL_PATH), 1e-3)
     terms = law.make_terms()
     q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, w, rng = _inputs()
+    dq_d[:3] = 0.0  # the position integral runs where the reference is at rest
     if force:
         law.inverse_dynamics.set_force_reference([10.0, 0.0, 150.0, 0.0, 2.0, 0.0])
     for _ in range(3):
@@ -48,6 +50,9 @@ def test_components_sum_to_the_command(force, k_i):
     # example.toml has a deadzone term on the ankle roll only: its own component, streamed like the others
     assert terms.ff_extra[5] != 0 and not terms.ff_extra[:5].any() and not terms.ff_extra[6:].any()
     assert np.abs(terms.fb_integral).max() > 0 if k_i else not terms.fb_integral.any()
+    assert np.abs(terms.fb_position_integral).max() > 0 if k_iq else not terms.fb_position_integral.any()
+    if k_iq and force:  # its torque is out of the force task's directions
+        np.testing.assert_allclose(law.inverse_dynamics.task_jacobian @ law.position_integral.tau, 0.0, atol=1e-9)
 
 
 def test_components_are_k6_to_k9_of_the_paper():

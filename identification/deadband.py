@@ -19,7 +19,7 @@ was measured), replacing the one the workbench fitted if any. The controller's f
 with ``tau = tau*`` (control/torque.py): it adds ``d`` in the direction of the command it already sends, the
 classic dead-zone inverse, smoothed over ``band``.
 
-``python -m servotau.control.deadband LOG MOTORS.toml OUT.toml`` writes MOTORS with the measured dead bands.
+``python -m servotau.identification.deadband LOG MOTORS.toml OUT.toml`` writes MOTORS with the measured dead bands.
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ def with_dead_band(model, d: float, band: float = BAND, provenance: str = ""):
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m servotau.control.deadband",
+    p = argparse.ArgumentParser(prog="python -m servotau.identification.deadband",
                                 description="Measure each joint's dead band on the holds of an identification log "
                                             "and write the motor file with it as the deadzone term.")
     p.add_argument("log", help="identification log (servotau identify collect)")
@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     for joint, s in aligned.samples.items():
         m = base[joint]
         db = rest_dead_band(s.dq_err, s.tau, s.dq, m.k_tau)
-        models[joint] = with_dead_band(m, db.d, provenance=f"{m.provenance}; deadzone: control/deadband.py on "
+        models[joint] = with_dead_band(m, db.d, provenance=f"{m.provenance}; deadzone: identification/deadband.py on "
                                                            f"the holds of {args.log}")
         print(f"{joint}: d = {1e3 * db.d:.3f} mrad (rest samples +{db.n_positive}/-{db.n_negative}, spread "
               f"{1e3 * db.spread:.3f} mrad, offset {1e3 * db.offset:+.3f} mrad)")

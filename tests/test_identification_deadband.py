@@ -1,12 +1,12 @@
-"""Tests of servotau.control.deadband: the servo's dead band measured on holds, and its feedforward term."""
+"""Tests of servotau.identification.deadband: the servo's dead band measured on holds, and its feedforward term."""
 
 import numpy as np
 import pytest
 
 from servotau.control.config import JointGains
-from servotau.control.deadband import BAND, rest_dead_band, with_dead_band
 from servotau.control.torque import JointTorqueController
 from servotau.errors import IdentificationError
+from servotau.identification.deadband import BAND, rest_dead_band, with_dead_band
 from servotau.identification.motor_params import EffectTerm, MotorModel
 
 K_TAU = 2e-4  # [rad/(N m)]
