@@ -1,5 +1,6 @@
 """Smoke tests of the paper's experiments (control/experiments.py): short runs, every output written."""
 
+import csv
 import json
 
 import numpy as np
@@ -67,6 +68,18 @@ def test_estimation_error_is_small_relative_to_the_peak(outputs):
     _, s, _ = outputs
     rms, peak = np.asarray(s["estimation"]["rms_Nm"]), np.asarray(s["estimation"]["peak_Nm"])
     assert np.all(np.isfinite(rms)) and np.all(rms < peak)
+
+
+def test_identification_table_compares_the_motor_files_with_the_servo(outputs):
+    """The estimation experiment tabulates the motor files' k_tau against the simulator's 1/kp: the knee's servo
+    (config/servo.toml, kp = 19608 N m/rad) appears, and the default file's k_tau is within 25 % of it."""
+    out, s, doc = outputs
+    table = s["estimation"]["identification"]
+    assert "## Identification against the simulator's servo" in doc and table in doc
+    rows = list(csv.reader((out / "estimation" / "identification_vs_servo.csv").open()))
+    knee = dict(zip(rows[0], next(r for r in rows if r[0] == "knee"), strict=True))
+    assert float(knee["1/kp"]) == pytest.approx(1.0 / 19608.0)
+    assert abs(float(knee["k_tau default"]) * 19608.0 - 1.0) < 0.25
 
 
 def test_results_document_has_every_section_and_the_paper_tables(outputs):
