@@ -33,6 +33,7 @@ SINGLE = ("coulomb_asym", "stribeck", "deadzone", "direction_gain", "backlash", 
 PAIRS = (("cogging", "coulomb_asym"), ("direction_gain", "load_friction"), ("stribeck", "cogging"))
 REFERENCE = ("coulomb", "stribeck", "deadzone", "direction_gain")
 CYCLE_S = 4.0  # [s] four cycles: 16 s of simulated data per case
+FINAL_OF = ("deadzone",)  # single cases whose final model (the effect added) is diagnosed too: about 5 s each
 
 CASES: dict[str, dict] = {"clean": {}}
 CASES.update({e: {e: {}} for e in SINGLE})
@@ -127,7 +128,7 @@ def run_case(name: str, cols: dict[str, np.ndarray], hidden: dict | None = None)
     if len(hidden) == 1:
         (effect,) = hidden
         d = diagnose(ds, base)
-        lad = add_effects(ds, base, effects=[effect], diagnose_final=False)
+        lad = add_effects(ds, base, effects=[effect], diagnose_final=name in FINAL_OF)
         c = d.candidate(effect)
         out.update(rank=d.rank_of(effect), gain=c.heldout_gain, fall=lad.fall(), partial=c.partial,
                    consistent=c.consistent, shape=dict(c.shape), at_grid_edge=c.at_grid_edge,
@@ -135,8 +136,11 @@ def run_case(name: str, cols: dict[str, np.ndarray], hidden: dict | None = None)
     else:
         lad = add_effects(ds, base, max_steps=4)
         d = lad.diagnoses[0]
-        out.update(added=[r.added for r in lad.rungs[1:]], fall=lad.fall(), final_verdict=lad.verdict,
-                   final_message=lad.diagnoses[-1].message, ranks={e: d.rank_of(e) for e in hidden})
+        out.update(added=[r.added for r in lad.rungs[1:]], fall=lad.fall(), ranks={e: d.rank_of(e) for e in hidden})
+    if lad.diagnoses and (len(hidden) != 1 or name in FINAL_OF):
+        last = lad.diagnoses[-1]
+        out.update(final_verdict=last.verdict, final_message=last.message, final_probes=dict(last.probes),
+                   final_partial=bool(last.top is not None and last.top.partial))
     out.update(verdict=d.verdict, message=d.message, top=d.top.effect if d.top else None,
                ranking=[(c.effect, c.heldout_gain) for c in d.ranking if c.testable],
                probes=dict(d.probes), confusion=None if d.confusion is None else list(d.confusion.effects),

@@ -56,6 +56,18 @@ def test_no_false_alarm_on_the_default_servo():
     o = outcome("clean")
     assert o["verdict"] == "no_missing_effect", o["message"]
     assert all(g < MIN_GAIN for _, g in o["ranking"])
+    assert o["probes"]["memory"] < MIN_GAIN, o["probes"]  # the residual's own past: 5.7 % measured
+
+
+def test_the_dead_band_crossings_left_after_the_dead_zone_are_unexplained():
+    """After the 3 mrad dead zone is added (fall 0.54) what remains is mostly the joint crossing the band freely:
+    there the servo gives no torque and the error depends on where the joint entered, a function of no present
+    signal. No effect and no probe of the present signals removes 20 % (at most 12 %); the residual's own past
+    does (23 % measured): the final verdict says so instead of no_missing_effect."""
+    o = outcome("deadzone")
+    assert o["fall"] >= BAR
+    assert o["final_verdict"] == "unexplained" and "own past" in o["final_message"], o["final_message"]
+    assert max(v for k, v in o["final_probes"].items() if k != "memory") < 2 * MIN_GAIN, o["final_probes"]
 
 
 def test_the_default_servo_effects_are_found_from_the_papers_model():

@@ -8,7 +8,8 @@ of the held-out error the effect removes.
 
 Non-parametric *probes* fit flexible functions of one family of signals to the current model's
 residual, also on held-out blocks: bins of velocity; of torque by velocity sign; of ``u`` by velocity
-sign; of position; a polynomial drift in time; lagged differences of ``u`` and ``q_des``. The named
+sign; of position; a polynomial drift in time; lagged differences of ``u`` and ``q_des``; and the residual's
+own past (``memory``: the residual ``h``, ``2 h`` and ``4 h`` earlier, ``h`` = ``MEMORY_HORIZON_S``). The named
 effect is *partially explained* (e.g. a Stribeck velocity outside the grid) when its family's probe
 removes much more than it does, or still removes ``REMAINING`` of the error (and a quarter of what the
 effect did) once the effect is in the model. A probe that removes error when no effect does means
@@ -19,8 +20,10 @@ Verdict:
 - ``missing_effect``: the best testable effect removes at least ``min_gain`` of the held-out error and
   helps in all held-out blocks but at most one.
 - ``unexplained``: no effect does, but a probe removes at least ``PROBE_FACTOR * min_gain`` (probes
-  have tens of free parameters), or the largest 2 % of the held-out residuals carry more than half of
-  the squared error and sit at the largest servo effort (the model fails at a current limit).
+  have tens of free parameters; the memory probe catches a state the model lacks: where the joint crosses
+  a dead band freely, its error depends on where it entered, a function of no present signal), or the
+  largest 2 % of the held-out residuals carry more than half of the squared error and sit at the largest
+  servo effort (the model fails at a current limit).
 - ``no_missing_effect``: neither.
 
 Effects that the data cannot test (see :mod:`~servotau.identification.workbench.excitation`) are
@@ -39,12 +42,13 @@ import numpy as np
 from servotau.errors import IdentificationError
 
 from ..loss import Loss
-from .data import Dataset
+from .data import SMOOTH_TAU_S, Dataset
 from .effects import Effect, get_effect, resolve_effects
 from .evaluate import Comparison, Fold, compare, error_of, folds_of
 from .excitation import Excitation, excitation_report
 from .library import EXPERIMENTS
 from .model import FittedModel, ModelSpec, Term, design, fit_spec, resolve_shapes, solve
+from .signals import delayed, ticks
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +64,14 @@ REMAINING = 0.05
 
 PROBE_FACTOR = 2.0
 """A probe (tens of free parameters) names ``unexplained`` structure from ``PROBE_FACTOR * min_gain`` on."""
+
+MEMORY_HORIZON_S = SMOOTH_TAU_S
+MEMORY_LAGS = (1, 2, 4)
+"""The memory probe predicts the held-out residual from its own values ``k h`` earlier (``k`` in ``MEMORY_LAGS``,
+``h`` = ``MEMORY_HORIZON_S`` [s], the torque's smoothing window): noise that the workbench's filters spread over
+neighbouring samples is forgotten after ``h`` (the velocity's longer SG window carries ``k_v`` times a
+differentiated encoder noise, orders smaller), so a residual still predictable ``h`` ahead has a state no term
+models. Three coefficients fitted on the training blocks, the residual's past read as on-line (causal)."""
 
 TAIL_FRACTION = 0.02
 TAIL_SHARE = 0.5
@@ -256,8 +268,6 @@ def probe_columns(signals, u: np.ndarray) -> dict[str, np.ndarray]:
         s = np.tanh(dq / 0.01)
         out["time"] = np.column_stack([x, x * x, x * dq, x * x * dq, x * s, x * x * s])
     if signals.dt is not None:
-        from .signals import delayed
-
         cols = []
         for lag in (0.002, 0.005, 0.01, 0.02, 0.04):
             k = max(1, int(round(lag / signals.dt)))
@@ -498,7 +508,23 @@ def _probe_gains(
             beta = _ridge(p[tr], y[tr] - b.pred[tr])
             pred[te] = b.pred[te] + p[te] @ beta
         out[family] = 1.0 - error_of(y - pred, y, loss) / e0 if e0 > 0 else 0.0
+    if ds.signals.dt is not None and only in (None, "memory"):
+        out["memory"] = _memory_gain(ds, bases, loss, e0)
     return out
+
+
+def _memory_gain(ds: Dataset, bases: list[_FoldBase], loss: Loss, e0: float) -> float:
+    """Held-out gain of predicting the residual from its own past (:data:`MEMORY_LAGS` x :data:`MEMORY_HORIZON_S`):
+    per block, the residual of the model fitted on the other blocks, its past read causally."""
+    y = ds.target
+    h = ticks(MEMORY_HORIZON_S, ds.signals.dt)
+    pred = np.full(ds.n, np.nan)
+    for b in bases:
+        tr, te = b.fold.train, b.fold.test
+        r = y - b.pred
+        p = np.column_stack([delayed(r, k * h) for k in MEMORY_LAGS])
+        pred[te] = b.pred[te] + p[te] @ _ridge(p[tr], r[tr])
+    return 1.0 - error_of(y - pred, y, loss) / e0 if e0 > 0 else 0.0
 
 
 def _verdict(ds, spec, base, ranking, probes, exc, min_gain) -> Diagnosis:
@@ -538,12 +564,21 @@ def _verdict(ds, spec, base, ranking, probes, exc, min_gain) -> Diagnosis:
         if confusion is not None:
             message += f"; to separate them: {confusion.experiment}"
     else:
-        best_probe = max(probes.items(), key=lambda kv: kv[1], default=(None, 0.0))
+        # a function of the present signals says which; the memory probe (any smooth residual) only that some remains
+        best_probe = max(((k, v) for k, v in probes.items() if k != "memory"), key=lambda kv: kv[1],
+                         default=(None, 0.0))
+        memory = probes.get("memory", 0.0)
         tail, where = _tail(ds, base)
+        no_effect = f"unexplained: no effect of the library removes {100 * min_gain:.0f} % of the held-out error, "
         if best_probe[0] is not None and best_probe[1] >= PROBE_FACTOR * min_gain:
             verdict = "unexplained"
-            message = (f"unexplained: no effect of the library removes {100 * min_gain:.0f} % of the held-out error, "
-                       f"but a free function of the {best_probe[0]} signals removes {100 * best_probe[1]:.0f} %")
+            message = no_effect + (f"but a free function of the {best_probe[0]} signals removes "
+                                   f"{100 * best_probe[1]:.0f} %")
+        elif memory >= PROBE_FACTOR * min_gain:
+            verdict = "unexplained"
+            message = no_effect + (f"but the residual's own past ({1e3 * MEMORY_HORIZON_S:.0f} ms and more earlier) "
+                                   f"predicts {100 * memory:.0f} % of it: a state no term models (e.g. a dead band "
+                                   "crossed freely: the error depends on where the joint entered)")
         elif tail >= TAIL_SHARE and where:
             verdict = "unexplained"
             message = (f"unexplained: {100 * tail:.0f} % of the squared held-out error sits in "
