@@ -638,14 +638,15 @@ def _identification_table(out: Path) -> str:
         t = m.extra.get(name)
         return float("nan") if t is None else 1e3 * t.coefficient
 
+    k_tau, k_v = servo.k_tau_nominal(), servo.k_v_nominal()
     rows = []
     for joint, label in zip(LEG, LEG_LABELS, strict=True):
         i = JOINT_NAMES.index(joint)
-        kp = servo.kp[i]
         d, pm = models["default"][joint], models["paper"][joint]
         coulomb = 1e3 * d.k_c if d.k_c else term(d, "coulomb")
-        rows.append([label, d.k_tau, pm.k_tau, 1.0 / kp, d.k_v, pm.k_v, (servo.kd[i] + servo.b[i]) / kp, coulomb,
-                     1e3 * servo.tau_c[i] / kp, term(d, "deadzone"), 1e3 * servo.i_deadzone[i] * servo.k_t[i] / kp])
+        rows.append([label, d.k_tau, pm.k_tau, k_tau[i], d.k_v, pm.k_v, k_v[i], coulomb,
+                     1e3 * servo.tau_c[i] * k_tau[i], term(d, "deadzone"),
+                     1e3 * servo.i_deadzone[i] * servo.k_t[i] * k_tau[i]])
     header = ["joint", "k_tau default", "k_tau paper model", "1/kp", "k_v default", "k_v paper model", "(kd + b)/kp",
               "Coulomb default [mrad]", "tau_c/kp [mrad]", "dead band default [mrad]", "i_dz k_t/kp [mrad]"]
     return _write_table(out / "identification_vs_servo", header, rows)
