@@ -51,6 +51,7 @@ class PositionIntegral:
         self.rest_velocity = float(rest_velocity)
         self.active = bool(np.any(self._rate > 0))
         self._cols = np.flatnonzero(self._rate > 0)  # integrating joints
+        self._eye = np.eye(self._cols.size)
         n = self.k_s.size
         self.i_q = np.zeros(n)  # [rad] integral state
         self.tau = np.zeros(n)  # [N m] output
@@ -72,7 +73,7 @@ class PositionIntegral:
         if not self.active:
             return self.tau
         cols, v = self._cols, self._v
-        proj = None if task_jacobian is None else _projector(task_jacobian[:, cols])
+        proj = None if task_jacobian is None else self._projector(task_jacobian[:, cols])
         np.multiply(self._rate * (np.abs(dq_d) < self.rest_velocity), e_q, out=v)
         self.i_q[cols] += v[cols] if proj is None else proj @ v[cols]
         np.clip(self.i_q, -self.limit, self.limit, out=self.i_q)
@@ -80,8 +81,7 @@ class PositionIntegral:
         self.tau[cols] = v[cols] if proj is None else proj @ v[cols]
         return self.tau
 
-
-def _projector(jac: np.ndarray) -> np.ndarray:
-    """``I - J^T (J J^T)^+ J``: the orthogonal projector onto the null space of ``J`` (k, m)."""
-    x = np.linalg.lstsq(jac @ jac.T, jac, rcond=1e-10)[0]  # (J J^T)^+ J
-    return np.eye(jac.shape[1]) - jac.T @ x
+    def _projector(self, jac: np.ndarray) -> np.ndarray:
+        """``I - J^T (J J^T)^+ J``: the orthogonal projector onto the null space of ``J`` (k, integrating joints)."""
+        x = np.linalg.lstsq(jac @ jac.T, jac, rcond=1e-10)[0]  # (J J^T)^+ J
+        return self._eye - jac.T @ x
