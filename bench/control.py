@@ -3,7 +3,8 @@
 Frames are recorded first from the simulated HRP-2 (30 joints, hanging, right leg in torque mode), then replayed
 through a fresh estimator and controller in a tight loop, as the control process sees them (the simulator runs in
 another process in the real setup). Prints JSON with the median and 99th percentile per tick [us], also split into
-estimation and control.
+estimation and control. Also the position integral's update alone (control/position_integral.py: 30 joints, the 6 of
+the right leg integrating), without and with a 5-row force-task Jacobian, and its share of the control tick.
 """
 
 import argparse
@@ -13,6 +14,7 @@ import time
 import numpy as np
 
 from servotau.control import ControlManager
+from servotau.control.position_integral import PositionIntegral
 from servotau.control.trajectory import TrajectoryPoint
 from servotau.estimation import EstimatorConfig, TorqueEstimator
 from servotau.simrobot.sim import SimConfig, SimRobot
@@ -59,6 +61,25 @@ def replay(info, frames, ref) -> tuple[np.ndarray, np.ndarray, str]:
     return np.array(t_est) * 1e-3, np.array(t_ctl) * 1e-3, mgr.mode.value
 
 
+def position_integral_us(n: int = 30, k: int = 5, reps: int = 5000) -> tuple[np.ndarray, np.ndarray]:
+    """Per-call times [us] of PositionIntegral.update without and with a (k, n) task Jacobian."""
+    rng = np.random.default_rng(0)
+    rate = np.zeros(n)
+    rate[:6] = 2.0
+    pi = PositionIntegral(np.full(n, 1e3), rate, np.full(n, 1e-3), 1e-3, 1e-3)
+    e_q, dq_d, jac = rng.normal(0.0, 1e-3, n), np.zeros(n), rng.normal(size=(k, n))
+    clock = time.perf_counter_ns
+    out = []
+    for task in (None, jac):
+        t = np.empty(reps)
+        for r in range(reps):
+            t0 = clock()
+            pi.update(e_q, dq_d, task)
+            t[r] = clock() - t0
+        out.append(t * 1e-3)
+    return out[0], out[1]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--json", action="store_true", help="print JSON (the only output format)")
@@ -74,6 +95,7 @@ def main() -> None:
         modes.add(mode)
     est_us, ctl_us = np.concatenate(est_us), np.concatenate(ctl_us)
     tick_us = est_us + ctl_us
+    pint_us, pint_task_us = position_integral_us()
 
     def pct(x, p):
         return round(float(np.percentile(x, p)), 1)
@@ -89,6 +111,9 @@ def main() -> None:
         "estimation_us_p99": pct(est_us, 99),
         "control_us_p50": pct(ctl_us, 50),
         "control_us_p99": pct(ctl_us, 99),
+        "position_integral_us_p50": pct(pint_us, 50),
+        "position_integral_task_us_p50": pct(pint_task_us, 50),
+        "position_integral_task_to_control_p50_ratio": round(pct(pint_task_us, 50) / pct(ctl_us, 50), 3),
         "targets_us": {"p50": 200, "p99": 500},
     }))
 
