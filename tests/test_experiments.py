@@ -8,6 +8,8 @@ import pytest
 
 from servotau.cli import main as cli_main
 from servotau.control import experiments as ex
+from servotau.hal.types import RobotInfo
+from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
 
 
 @pytest.fixture(scope="module")
@@ -122,3 +124,14 @@ def test_force_metrics_report_the_worst_apex_and_the_troughs():
     assert m["apex_error_pct"] == pytest.approx(-10.0, abs=1e-6)
     np.testing.assert_allclose(m["trough_errors_pct"], [20.0, 5.0], atol=1e-6)
     assert m["trough_error_pct"] == pytest.approx(20.0, abs=1e-6)
+
+
+def test_control_config_overrides_change_one_setting_each():
+    """The experiments' config overrides: K6 on every torque joint, k_iq = 0 switches the position integral off
+    (the 'k_iq=0' runs), force axes add the force task; without them the shipped integral stays on."""
+    info = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
+    shipped = ex._control_config(info, 0.1, ())
+    off = ex._control_config(info, 0.1, ex.FORCE_AXES, k_iq=0.0)
+    assert shipped.joint_vector("k_iq")[:6].min() > 0 and shipped.force is None
+    assert not off.joint_vector("k_iq").any() and off.force.axes == ex.FORCE_AXES
+    np.testing.assert_allclose(off.joint_vector("k_s"), shipped.joint_vector("k_s"))
