@@ -174,6 +174,26 @@ def test_delay_term_solves_the_command_it_reads(tmp_path):
     assert max(abs(d) for d in np.diff(q_des)) > 2e-3  # the torque step moved the command through the term
 
 
+def test_deadzone_crossing_term_follows_the_command_it_sent(tmp_path):
+    """The dead zone's crossing form reads the previous tick's command: the controller's commands are the batch
+    model on the commands it sent, and a desired torque through zero moves the command across the band."""
+    text = MOTORS_WITH_EXTRA.split("[joints.RLEG_JOINT3.extra.deadzone]")[0]
+    text += ("[joints.RLEG_JOINT3.extra.deadzone]\ncoefficient = 0.003\n"
+             "shape = { band = 0.0003, damping_share = 0.0, crossing = 1.0, width = 0.003 }\n")
+    motors = MotorParameters.load_toml(_extra_file(tmp_path, text))
+    knee = motors["RLEG_JOINT3"]
+    tc = JointTorqueController(JOINT_NAMES, motors, {"RLEG_JOINT3": JointGains(k_p=0.0)}, 1e-3)
+    ticks = 60
+    tau_d = np.linspace(20.0, -20.0, ticks)  # [N m] through zero: u crosses the band
+    q = 0.5 + 1e-5 * np.arange(ticks)  # [rad] the joint creeps
+    tau, dq, qv, q_des = np.zeros(30), np.zeros(30), np.zeros(30), np.zeros(ticks)
+    for k in range(ticks):
+        tau[KNEE], qv[KNEE] = tau_d[k], q[k]
+        q_des[k] = q[k] + tc.update(tau, tau, dq, qv, np.zeros(30), 1e-3 * k)[KNEE]
+    np.testing.assert_allclose(q_des - q, knee.predict(tau_d, np.zeros(ticks), q=q, q_des=q_des), atol=1e-12)
+    assert q_des[0] - q[0] > 3e-3 and q_des[-1] - q[-1] < -3e-3  # from one edge of the band to the other
+
+
 def test_unknown_extra_term_is_a_config_error_naming_the_file_and_field(tmp_path):
     """A term the workbench does not know (or a wrong shape) raises ConfigError naming the file and the field."""
     from servotau.config import load_toml

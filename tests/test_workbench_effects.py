@@ -59,15 +59,15 @@ def test_no_false_alarm_on_the_default_servo():
     assert o["probes"]["memory"] < MIN_GAIN, o["probes"]  # the residual's own past: 5.7 % measured
 
 
-def test_the_dead_band_crossings_left_after_the_dead_zone_are_unexplained():
-    """After the 3 mrad dead zone is added (fall 0.54) what remains is mostly the joint crossing the band freely:
-    there the servo gives no torque and the error depends on where the joint entered, a function of no present
-    signal. No effect and no probe of the present signals removes 20 % (at most 12 %); the residual's own past
-    does (23 % measured): the final verdict says so instead of no_missing_effect."""
+def test_the_dead_zone_is_found_in_its_crossing_form_with_the_simulators_width():
+    """The 3 mrad dead band on the position error is named in its crossing form (inside the band the joint is
+    free and its error follows the command's lead from the edge it entered at), with a half-width within 20 %
+    of the simulator's (3.36 mrad measured); with it nothing is missing (fall 0.96 measured)."""
     o = outcome("deadzone")
+    width = EFFECT_PARAMS["deadzone"]["e_deadzone"][0]  # [rad]
+    assert o["shape"].get("crossing") == 1.0 and abs(o["shape"]["width"] - width) <= 0.2 * width, o["shape"]
     assert o["fall"] >= BAR
-    assert o["final_verdict"] == "unexplained" and "own past" in o["final_message"], o["final_message"]
-    assert max(v for k, v in o["final_probes"].items() if k != "memory") < 2 * MIN_GAIN, o["final_probes"]
+    assert o["final_verdict"] == "no_missing_effect", o["final_message"]
 
 
 def test_the_default_servo_effects_are_found_from_the_papers_model():
@@ -133,9 +133,8 @@ def test_confusable_runner_up_comes_with_the_separating_experiment():
 def test_every_pair_of_hidden_effects():
     """All 55 pairs (``make experiments``): the greedy ladder's first step adds one of the two hidden effects
     (or a documented confusable one) in every pair (55/55 measured; logs hiding a current limit run the fast
-    excitation, see ``EXCITATION_OF``), and the final verdict is honest in every pair: where the held-out error
-    did not fall by half (the 3 mrad dead zone's free crossings), it says that structure remains; the table is
-    written for the report."""
+    excitation, see ``EXCITATION_OF``), and the held-out error falls by at least half in every pair (the
+    smallest fall measured: 0.53, Stribeck + thermal drift); the table is written for the report."""
     pairs = list(itertools.combinations(SINGLE, 2))
     results = run_pairs(pairs)
     _CACHE_DIR.mkdir(parents=True, exist_ok=True)
@@ -148,15 +147,12 @@ def test_every_pair_of_hidden_effects():
     # an added effect that is neither hidden nor documented as confusable with a hidden one
     false = [(o["name"], a) for o, p in zip(results, pairs, strict=True) for a in o["added"]
              if a not in p and not any(_confusable(a, e) for e in p)]
-    # an honest final verdict: the error fell by half, or the verdict says that something remains (unexplained, or a
-    # named effect flagged partially explained); not no_missing_effect with more than half of the error left
-    honest = [o for o in results if o["fall"] >= BAR or o["final_verdict"] == "unexplained" or o["final_partial"]]
     under = [(o["name"], round(o["fall"], 3), o["final_verdict"]) for o in results if o["fall"] < BAR]
     memory = [o["name"] for o in results if o["final_verdict"] == "unexplained" and "own past" in o["final_message"]]
     verdicts = {v: sum(o["final_verdict"] == v for o in results) for v in sorted({o["final_verdict"] for o in results})}
     print(f"\nfirst step right in {len(first_ok)}/{len(pairs)} pairs, both added in {len(both)}/{len(pairs)} "
           f"({len(both_elastic)} counting elastic for backlash), {len(false)} false additions: {false}")
-    print(f"honest final verdict in {len(honest)}/{len(pairs)} pairs; fall under {BAR}: {under}; final verdicts "
+    print(f"smallest fall {min(o['fall'] for o in results):.3f}; fall under {BAR}: {under}; final verdicts "
           f"{verdicts}, {len(memory)} unexplained by the memory probe: {memory}")
     assert len(first_ok) == len(pairs), [o["name"] for o in results if o not in first_ok]
-    assert len(honest) == len(pairs), [(o["name"], o["fall"], o["final_message"]) for o in results if o not in honest]
+    assert not under, under

@@ -131,6 +131,53 @@ def test_online_saturation_term_does_not_read_this_ticks_command():
     assert a == b and a != 5e-5 * 40.0
 
 
+CROSSING = {"band": 3e-4, "damping_share": 0.0, "crossing": 1.0, "width": 2e-3}
+
+
+def test_deadzone_crossing_form_follows_the_command_lead_inside_the_band():
+    """Crossing form: sign(m) outside the band; inside, the sign of the last effort outside plus the command's
+    lead since the entry over the width (the joint crosses the band freely from the edge it entered at); it
+    enters at |m| <= band and leaves at |m| > 1.5 band."""
+    from servotau.identification.workbench.library import _deadzone_columns, _deadzone_fold, deadzone
+    from servotau.identification.workbench.signals import Signals
+
+    # [rad] band 1 mrad: inside from 2 (|u| <= 1 mrad) to 4 (hysteresis: 1.2 mrad is not beyond 1.5 band), and 6-7
+    u = np.array([2.0, 1.5, 0.5, -1.2, 0.2, -2.0, -0.4, 0.3]) * 1e-3
+    n = len(u)
+    q_des = np.arange(n) * 1e-4  # lead = q_des[k-1] - q[k]: 0, 0, 0.1, 0.2, ... mrad
+    sig = Signals({"u": u, "u_v": np.zeros(n), "tau": u, "dq": np.zeros(n), "q": np.zeros(n), "q_des": q_des}, 1e-3, n)
+    phi = deadzone(sig, band=1e-3, crossing=1.0, width=2e-3)
+    np.testing.assert_allclose(phi, [1, 1, 1, 1.05, 1.1, -1, -1, -0.95], atol=1e-12)
+    # fitted as two columns (edge, lead since the entry): width = c_edge / c_lead reproduces their sum
+    cols = _deadzone_columns(sig, band=1e-3, crossing=1.0)
+    c, shape = _deadzone_fold(np.array([3e-3, 1.5]), {"band": 1e-3, "crossing": 1.0})
+    assert shape["width"] == pytest.approx(2e-3)
+    np.testing.assert_allclose(c * deadzone(sig, **shape), cols @ [3e-3, 1.5], atol=1e-15)
+    assert _deadzone_fold(np.array([3e-3]), {"band": 1e-3, "v_th": 0.0}) == (3e-3, {"band": 1e-3, "v_th": 0.0})
+
+
+def test_deadzone_crossing_form_reads_the_command_online_and_offline():
+    """Only the crossing form needs q and q_des (named when missing); on-line it equals the batch evaluation
+    and does not read this tick's command, so command() needs no division."""
+    from servotau.identification.workbench.online import required_signals
+
+    c, _ = signals(1.0)
+    legacy, crossing = model_with("deadzone"), MotorModel(k_tau=5e-5, k_v=6e-3, k_c=1e-4, provenance="test",
+                                                          extra={"deadzone": EffectTerm(2e-3, CROSSING)})
+    assert required_signals(legacy) == [] and required_signals(crossing) == ["q", "q_des"]
+    with pytest.raises(IdentificationError, match=r"'deadzone' needs signal\(s\) \['q', 'q_des'\]"):
+        crossing.predict(c["tau"], c["dq"])
+    batch = crossing.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"])
+    u = 5e-5 * c["tau"] + 6e-3 * c["dq"] + 1e-4 * np.sign(c["dq"])
+    assert 0.05 < np.mean(np.abs(u) <= CROSSING["band"]) < 0.95  # the log enters and leaves the band
+    on = crossing.online(1e-3)
+    ticks = [on.step(c["tau"][k], c["dq"][k], q=c["q"][k], q_des=c["q_des"][k]) for k in range(len(c["t"]))]
+    np.testing.assert_allclose(ticks, batch, rtol=1e-9, atol=1e-15)
+    a = on.predict(1.0, 0.0, q=0.0, q_des=0.0)
+    assert a == on.predict(1.0, 0.0, q=0.0, q_des=1.0)
+    assert on.command(0.0, 1.0, 0.0) == pytest.approx(a)
+
+
 def test_fitted_model_round_trips_through_the_motor_parameter_file(tmp_path):
     """add -> save: the TOML file keeps every term and shape; the loaded model predicts the same."""
     ds = load_dataset(synthetic_table(lambda t, q, dq, tau: 2e-4 * np.sin(2 * np.pi * q / 0.08), seconds=6.0))

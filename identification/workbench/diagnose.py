@@ -21,7 +21,8 @@ Verdict:
   helps in all held-out blocks but at most one.
 - ``unexplained``: no effect does, but a probe removes at least ``PROBE_FACTOR * min_gain`` (probes
   have tens of free parameters; the memory probe catches a state the model lacks: where the joint crosses
-  a dead band freely, its error depends on where it entered, a function of no present signal), or the
+  a dead band freely, its error depends on where it entered, a function of no present signal; ``deadzone``'s
+  crossing form models it when the log has the command ``q_des``), or the
   largest 2 % of the held-out residuals carry more than half of the squared error and sit at the largest
   servo effort (the model fails at a current limit).
 - ``no_missing_effect``: neither.
@@ -578,7 +579,8 @@ def _verdict(ds, spec, base, ranking, probes, exc, min_gain) -> Diagnosis:
             verdict = "unexplained"
             message = no_effect + (f"but the residual's own past ({1e3 * MEMORY_HORIZON_S:.0f} ms and more earlier) "
                                    f"predicts {100 * memory:.0f} % of it: a state no term models (e.g. a dead band "
-                                   "crossed freely: the error depends on where the joint entered)")
+                                   "crossed freely in a log without the command: the error depends on where the "
+                                   "joint entered)")
         elif tail >= TAIL_SHARE and where:
             verdict = "unexplained"
             message = (f"unexplained: {100 * tail:.0f} % of the squared held-out error sits in "

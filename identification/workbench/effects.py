@@ -72,6 +72,9 @@ class Effect:
         coefficient_range: ``(low, high)``: the coefficients the physics allows (e.g. a fraction); a shape whose
             fit gives a coefficient outside is not chosen (the term would be a generic correction, not the
             effect). None: any coefficient.
+        shape_signals: ``shape_signals(shape) -> names``: signals that some shapes read besides ``signals``
+            (e.g. the crossing form of ``deadzone`` reads ``q`` and ``q_des``); a grid function should offer
+            such shapes only when the signals are there.
     """
 
     name: str
@@ -88,6 +91,7 @@ class Effect:
     history: bool = False
     confusable: tuple[str, ...] = ()
     coefficient_range: tuple[float, float] | None = None
+    shape_signals: Callable[[Mapping[str, float]], Iterable[str]] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() or self.name in RESERVED:
@@ -117,6 +121,11 @@ class Effect:
     def uses_model(self) -> bool:
         """The regressor reads ``u``, ``u_tau`` or ``u_v``: signals of the model it is added to."""
         return bool({"u", "u_tau", "u_v"} & set(self.signals))
+
+    def signals_of(self, shape: Mapping[str, float]) -> tuple[str, ...]:
+        """The signals the term of ``shape`` reads: ``signals`` and those of ``shape_signals``."""
+        extra = tuple(self.shape_signals(shape)) if self.shape_signals is not None else ()
+        return self.signals + tuple(x for x in extra if x not in self.signals)
 
     def evaluate(self, signals: Signals, shape: Mapping[str, float]) -> np.ndarray:
         """``phi`` [n] at ``shape``, checked to be finite and of the right length."""

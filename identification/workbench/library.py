@@ -12,7 +12,8 @@ effect                    phi                                                   
 ``coulomb_asym``          ``|s(dq, v_eps)|``                                     dq
 ``stribeck``              ``s(dq, v_eps) exp(-(dq / v_s)^2)``                    dq
 ``stiction``              ``z exp(-(dq / v_th)^2)``, z = sign of the last move   dq history (a latch)
-``deadzone``              ``c + (1 - |c|) z exp(-(dq / v_th)^2)``, see below    tau, dq (+ a latch if v_th)
+``deadzone``              ``c + (1 - |c|) z exp(-(dq / v_th)^2)``, see below    tau, dq (+ a latch if v_th;
+                                                                                 q, q_des if crossing)
 ``direction_gain``        ``s(dq, v_eps) u``                                     tau, dq
 ``load_friction``         ``|tau| s(dq, v_eps)``                                 tau, dq
 ``backlash``              ``a (1 + gain exp(-(tau / tau_band)^2))``              tau, ddq (+ history if lag)
@@ -28,6 +29,11 @@ effect                    phi                                                   
 ``z`` the sign of the last ``|m| > band`` (``v_th = 0``: no latch, ``phi = c``). A dead band on the position
 error lets the joint rest anywhere inside it with no servo torque: held by friction after a push it stays
 at the edge it was pushed to (``z``); crossing the band freely (fast) it is on average at the centre.
+Crossing form (``crossing = 1``, offered when the log has ``q`` and ``q_des``): ``sign(m)`` outside the band;
+inside, ``z + (lead(t) - lead(t_entry)) / width``: the joint is free there and its error follows the command's
+lead (``q_des(t - 1) - q(t)``, as for ``saturation``) from the edge it entered at. It is fitted as two columns,
+the edge and the lead since the entry; ``width`` [rad], the band's half-width, is the ratio of their coefficients
+(the lead's is 1 in theory). Simulated knee, 3 mrad dead band: width 3.4 mrad, fall 0.95 (docs/workbench.md).
 
 ``saturation``: saturated while the motor-torque proxy ``|tau + beta dq|`` exceeds ``tau_sat`` [N m] (until it
 falls below ``release tau_sat``); ``lead = q_des(t - 1 tick) - q(t)``, its change since the onset of the limit is
@@ -50,7 +56,17 @@ import numpy as np
 
 from .effects import Effect, register_effect
 from .excitation import Excitation
-from .signals import Signals, delayed, direction_latch, hysteresis, lowpass, lowpass_gain, run_onsets, ticks
+from .signals import (
+    Signals,
+    delayed,
+    direction_latch,
+    hysteresis,
+    lowpass,
+    lowpass_gain,
+    run_onsets,
+    sign_latch,
+    ticks,
+)
 
 U_REF = 1e-3  # [rad] scale of u in the thermal heating proxy
 
@@ -148,17 +164,74 @@ def stiction(s: Signals, v_th: float) -> np.ndarray:
     return direction_latch(dq, v_th) * np.exp(-((dq / v_th) ** 2))
 
 
-def deadzone(s: Signals, band: float, damping_share: float = 0.0, v_th: float = 0.0) -> np.ndarray:
+def deadzone(
+    s: Signals, band: float, damping_share: float = 0.0, v_th: float = 0.0, crossing: float = 0.0, width: float = 0.0
+) -> np.ndarray:
     """A step of the error at zero servo effort ``m = u - damping_share u_v`` [rad], smoothed over ``band``
     [rad]; with ``v_th > 0`` [rad/s], where the effort is inside the band the joint rests at the edge of the
     dead band it was last pushed against (the sign of the last ``|m| > band``), fading to the band's centre
-    as it moves faster than ``v_th`` (crossing the band freely)."""
+    as it moves faster than ``v_th`` (crossing the band freely).
+
+    ``crossing = 1``: the crossing form of a dead band on the position error (``v_th`` unused). Outside it
+    the step ``sign(m)``; inside, the joint is free and its error follows the command's lead from the edge it
+    entered at: ``z + (lead(t) - lead(t_entry)) / width``, ``z`` the sign of the last effort outside,
+    ``lead = q_des(t - 1) - q(t)`` (:func:`command_lead`), ``width`` [rad] the band's half-width (0: the edge
+    alone). The joint enters the band when ``|m| <= band`` and leaves it when ``|m| > DZ_RELEASE band``
+    (hysteresis). Reads ``q`` and ``q_des``: the target must be ``q_des - q``.
+    """
+    if crossing:
+        edge, lead = _deadzone_crossing(s, band, damping_share)
+        return edge + lead / width if width else edge
     m = s["u"] - damping_share * s["u_v"]
     step = np.clip(m / band, -1.0, 1.0)
     if v_th <= 0.0:
         return step
     rest = direction_latch(m, band) * np.exp(-((s["dq"] / v_th) ** 2))
     return step + (1.0 - np.abs(step)) * rest
+
+
+def _deadzone_crossing(s: Signals, band: float, damping_share: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two columns of the crossing form: the edge (``sign(m)`` outside the band, inside the sign of the
+    last effort outside) and the command's lead since the entry into the band [rad] (0 outside)."""
+    m = s["u"] - damping_share * s["u_v"]
+    outside = hysteresis(np.abs(m), DZ_RELEASE * band, band)
+    inside = ~outside
+    lead = command_lead(s)
+    entry = run_onsets(inside)
+    edge = np.where(inside, sign_latch(m, outside), np.sign(m))
+    return edge, np.where(inside, lead - lead[np.maximum(entry, 0)], 0.0)
+
+
+def _deadzone_columns(
+    s: Signals, band: float, damping_share: float = 0.0, v_th: float = 0.0, crossing: float = 0.0, width: float = 0.0
+) -> np.ndarray:
+    """The step alone, or (crossing form) the edge and the lead since the entry, fitted separately: their
+    coefficients are the band's half-width and the part of the lead the error keeps (1 in theory)."""
+    if not crossing:
+        return deadzone(s, band, damping_share, v_th)
+    return np.column_stack(_deadzone_crossing(s, band, damping_share))
+
+
+def _deadzone_fold(c: np.ndarray, shape: Mapping[str, float]) -> tuple[float, dict[str, float]]:
+    # c_edge edge + c_lead lead = c_edge (edge + lead / width), width = c_edge / c_lead
+    if not shape.get("crossing"):
+        return float(c[0]), dict(shape)
+    return float(c[0]), {**shape, "width": float(c[0] / c[1]) if c[1] != 0.0 else 0.0}
+
+
+def _deadzone_grid(s: Signals) -> tuple[dict[str, float], ...]:
+    """The step (with or without the rest latch) for every band and damping share; with the command and the
+    position in the log, the crossing form too, for a dead band on the position error (shares 0 and 0.33:
+    inside such a band the servo's damping still acts, so the effort is ``u`` or close to it)."""
+    out = [{"band": b, "damping_share": d, "v_th": v} for d in _DZ_SHARES for b in _DZ_BANDS for v in _REST]
+    if "q" in s and "q_des" in s:
+        out += [{"band": b, "damping_share": d, "crossing": 1.0} for d in _DZ_SHARES[:2] for b in _DZ_BANDS]
+    return tuple(out)
+
+
+def deadzone_signals(shape: Mapping[str, float]) -> tuple[str, ...]:
+    """Signals the ``deadzone`` term of ``shape`` reads besides its own: ``q`` and ``q_des`` in the crossing form."""
+    return ("q", "q_des") if shape.get("crossing") else ()
 
 
 def direction_gain(s: Signals, v_eps: float) -> np.ndarray:
@@ -313,27 +386,53 @@ class _StictionOnline:
 
 
 class _DeadzoneOnline:
-    """``deadzone`` on-line: the step, and the latch of the sign of the last effort beyond the band."""
+    """``deadzone`` on-line: the step, the latch of the sign of the last effort beyond the band and, in the
+    crossing form, the last command and the lead at the entry into the band."""
 
     def __init__(self, shape: Mapping[str, float], period: float):
         self.band, self.share, self.v_th = shape["band"], shape.get("damping_share", 0.0), shape.get("v_th", 0.0)
+        self.crossing, self.width = bool(shape.get("crossing", 0.0)), shape.get("width", 0.0)
         self.z = 0.0
+        self.outside = False  # the detector's state (crossing form: with hysteresis)
+        self.inside = False  # the last committed sample was inside the band (False before the first)
+        self.q_des_prev: float | None = None  # [rad] the command of the last tick
+        self.entry_lead = 0.0  # [rad]
 
     def _m(self, x: Mapping[str, float]) -> float:
         return x["u"] - self.share * x["u_v"]
 
+    def _lead(self, x: Mapping[str, float]) -> float:
+        return (x["q_des"] if self.q_des_prev is None else self.q_des_prev) - x["q"]
+
+    def _outside(self, m: float) -> bool:
+        if not self.crossing:
+            return abs(m) > self.band
+        return abs(m) > (self.band if self.outside else DZ_RELEASE * self.band)  # hysteresis
+
     def value(self, x: Mapping[str, float]) -> float:
         m = self._m(x)
+        outside = self._outside(m)
+        if self.crossing:
+            if outside:
+                return math.copysign(1.0, m)
+            lead = self._lead(x) - (self.entry_lead if self.inside else self._lead(x))
+            return self.z + (lead / self.width if self.width else 0.0)
         step = min(1.0, max(-1.0, m / self.band))
         if self.v_th <= 0.0:
             return step
-        z = math.copysign(1.0, m) if abs(m) > self.band else self.z
+        z = math.copysign(1.0, m) if outside else self.z
         return step + (1.0 - abs(step)) * z * math.exp(-((x["dq"] / self.v_th) ** 2))
 
     def commit(self, x: Mapping[str, float]) -> None:
         m = self._m(x)
-        if abs(m) > self.band:
+        self.outside = self._outside(m)
+        if self.outside:
             self.z = math.copysign(1.0, m)
+        elif self.crossing and not self.inside:
+            self.entry_lead = self._lead(x)
+        self.inside = not self.outside
+        if self.crossing:
+            self.q_des_prev = x["q_des"]
 
 
 class _LagOnline:
@@ -450,6 +549,13 @@ class _SaturationOnline:
 _V_EPS = (0.0, 0.005, 0.01, 0.02, 0.05)  # [rad/s] sign smoothing
 _V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
 _REST = (0.0, 0.01, 0.05)  # [rad/s] dead zone: resting below this speed at the last edge (0: no latch)
+_DZ_BANDS = (3e-5, 1e-4, 3e-4, 1e-3)  # [rad] dead zone: the effort's smoothing band (the detector of the crossing form)
+_DZ_SHARES = (0.0, 0.33, 0.67)  # dead zone: the part of k_v that is the servo's damping (0: a dead band on the error)
+DZ_RELEASE = 1.5
+"""Crossing form of ``deadzone``: the joint leaves the band when ``|m|`` exceeds ``DZ_RELEASE band`` and enters it
+when ``|m|`` falls to ``band`` (hysteresis: the effort hovers at the band's edge during a slow crossing, and each
+flicker would restart it from an edge). Tried 1 (none), 1.5 and 2 on the dead-zone log and its pair with cogging:
+falls 0.957 / 0.894 (cogging not kept), 0.953 / 0.952, 0.949 / 0.944."""
 _LAGS = (0.0, 0.002, 0.005)  # [s] delay of the inertia term (that of the torque estimate)
 
 BUILTIN = (
@@ -477,14 +583,13 @@ BUILTIN = (
         _holds_after_motion, online=_StictionOnline, history=True, confusable=("stribeck", "backlash"),
     ),
     Effect(
-        "deadzone", deadzone,
-        tuple({"band": b, "damping_share": d, "v_th": v}
-              for d in (0.0, 0.33, 0.67) for b in (3e-5, 1e-4, 3e-4, 1e-3) for v in _REST),
-        ("tau", "dq", "u", "u_v"),
+        "deadzone", deadzone, _deadzone_grid, ("tau", "dq", "u", "u_v"),
         "residual against the linear prediction u: a step at u = 0 (the servo needs a minimum error); at rest with "
-        "no effort, the sign of the last effort (the joint stays at the edge of the dead band it was pushed to)",
+        "no effort, the sign of the last effort (the joint stays at the edge of the dead band it was pushed to); "
+        "while the effort is near zero, the error follows the command's lead (the joint crosses the band freely)",
         "servo_error", "dead zone of the servo (on the position error or the current)", _torque_reversal_at_rest,
-        online=_DeadzoneOnline, confusable=("backlash", "coulomb"),
+        fit_columns=_deadzone_columns, fold=_deadzone_fold, online=_DeadzoneOnline,
+        confusable=("backlash", "coulomb"), shape_signals=deadzone_signals,
     ),
     Effect(
         "direction_gain", direction_gain, tuple({"v_eps": v} for v in _V_EPS[1:]), ("tau", "dq", "u"),

@@ -5,14 +5,14 @@ Signals each effect needs on-line (``ONLINE_SIGNALS``): the controller gives ``t
 estimated torque), ``dq`` [rad/s], ``q`` [rad], ``q_des`` [rad] (the command of this tick), ``t`` [s] and,
 for ``elastic`` and ``backlash``, the estimator's ``ddq`` [rad/s^2] (off-line the workbench filters ``q``
 with the term's ``window``; given ``ddq``, :func:`predict_batch` uses it instead, as on-line). Effects
-with memory (``stiction``, ``thermal_drift``, ``motor_lag``, ``delay``, ``saturation``, and ``elastic`` and
-``backlash`` with a ``lag``) keep their state in the :class:`OnlineModel`; call :meth:`OnlineModel.step` exactly once
-per tick.
+with memory (``stiction``, ``thermal_drift``, ``motor_lag``, ``delay``, ``saturation``, ``deadzone`` with a latch
+or in its crossing form, and ``elastic`` and ``backlash`` with a ``lag``) keep their state in the
+:class:`OnlineModel`; call :meth:`OnlineModel.step` exactly once per tick.
 
 ``delay`` reads the command of the current tick: the model is then affine in ``q_des``, and
 :meth:`OnlineModel.command` solves ``q_des = q + model(q_des)`` for the feedforward. ``saturation`` reads
 the commands of the previous ticks only (past the limit the command does not set the torque): its
-term does not change with this tick's command.
+term does not change with this tick's command; nor does ``deadzone``'s crossing form.
 """
 
 from __future__ import annotations
@@ -37,9 +37,9 @@ BUILTIN_BY_NAME = {e.name: e for e in BUILTIN}
 def required_signals(model: MotorModel) -> list[str]:
     """Signals (besides ``tau`` and ``dq``) that evaluating ``model`` needs."""
     out: list[str] = []
-    for name in model.extra:
+    for name, term in model.extra.items():
         eff = get_effect(name)
-        for s in eff.signals:
+        for s in eff.signals_of(term.shape):
             s = "ddq" if (s == "q" and name in ("elastic", "backlash")) else s
             if s not in (*BASE_SIGNALS, "u", "u_tau", "u_v") and s not in out:
                 out.append(s)
@@ -53,7 +53,8 @@ ONLINE_SIGNALS = {
     "coulomb_asym": "dq",
     "stribeck": "dq",
     "stiction": "dq (history: a latch of the last direction)",
-    "deadzone": "tau, dq (history if v_th > 0: a latch of the sign of the last effort beyond the band)",
+    "deadzone": "tau, dq (history if v_th > 0: a latch of the sign of the last effort beyond the band); in the "
+    "crossing form also q, q_des (history: the latch, the last command and the lead at the entry into the band)",
     "direction_gain": "tau, dq",
     "load_friction": "tau, dq",
     "backlash": "tau, ddq (the estimator's acceleration; history: the last `lag` seconds of it)",
@@ -101,9 +102,9 @@ def predict_batch(
 
 
 def _check_signals(model: MotorModel, cols: Mapping[str, object], period: float | None) -> None:
-    for name in model.extra:
+    for name, term in model.extra.items():
         eff = get_effect(name)
-        need = [s for s in eff.signals if s not in ("u", "u_tau", "u_v")]
+        need = [s for s in eff.signals_of(term.shape) if s not in ("u", "u_tau", "u_v")]
         if name in ("elastic", "backlash") and "q" not in cols:
             need = [s if s != "q" else "ddq" for s in need]
         missing = [s for s in need if s not in cols]

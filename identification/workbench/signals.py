@@ -117,10 +117,14 @@ def lowpass(x: np.ndarray, time_constant: float, dt: float, y0: float | None = N
 
 def direction_latch(dq: np.ndarray, threshold: float) -> np.ndarray:
     """Sign of the last velocity with ``|dq| > threshold`` [rad/s] (0 before any motion)."""
-    moving = np.abs(dq) > threshold
-    idx = np.where(moving, np.arange(len(dq)), -1)
+    return sign_latch(dq, np.abs(dq) > threshold)
+
+
+def sign_latch(x: np.ndarray, flag: np.ndarray) -> np.ndarray:
+    """Sign of ``x`` at the last sample where ``flag`` is True (0 before the first)."""
+    idx = np.where(flag, np.arange(len(x)), -1)
     np.maximum.accumulate(idx, out=idx)
-    out = np.sign(dq[np.maximum(idx, 0)])
+    out = np.sign(x[np.maximum(idx, 0)])
     out[idx < 0] = 0.0
     return out
 
