@@ -125,23 +125,23 @@ def _control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: flo
     from servotau.control import ControlConfig
 
     data = copy.deepcopy(load_toml(CONFIG_DIR / "control.toml").data)
-    if k6 is not None:
-        data["defaults"].pop("k_s", None)
-        data["defaults"]["k6"] = k6
-        for joint in data.get("joints", {}).values():  # no per-joint position gain may override the sweep
-            joint.pop("k6", None)
-            joint.pop("k_s", None)
-    if k7 is not None:  # a constant velocity gain for the whole run
-        data["defaults"].pop("k_d", None)
-        data["defaults"]["k7"] = k7
-        data["defaults"]["k7_scaling"] = "constant"
+
+    def every_joint(values: dict, drop: tuple[str, ...] = ()) -> None:
+        """``values`` in [defaults] for every torque joint: ``drop`` (the same gain in another unit) removed there,
+        and no per-joint table keeps either."""
+        for key in drop:
+            data["defaults"].pop(key, None)
+        data["defaults"].update(values)
         for joint in data.get("joints", {}).values():
-            for key in ("k7", "k_d", "k7_scaling"):
+            for key in (*values, *drop):
                 joint.pop(key, None)
+
+    if k6 is not None:
+        every_joint({"k6": k6}, drop=("k_s",))
+    if k7 is not None:  # a constant velocity gain for the whole run
+        every_joint({"k7": k7, "k7_scaling": "constant"}, drop=("k_d",))
     if k_iq is not None:
-        data["defaults"]["k_iq"] = k_iq
-        for joint in data.get("joints", {}).values():
-            joint.pop("k_iq", None)
+        every_joint({"k_iq": k_iq})
     if motors is not None:
         data["motors"] = motors
     if velocity_feedforward is not None:

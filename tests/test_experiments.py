@@ -128,10 +128,16 @@ def test_force_metrics_report_the_worst_apex_and_the_troughs():
 
 def test_control_config_overrides_change_one_setting_each():
     """The experiments' config overrides: K6 on every torque joint, k_iq = 0 switches the position integral off
-    (the 'k_iq=0' runs), force axes add the force task; without them the shipped integral stays on."""
+    (the 'k_iq=0' runs), a k7 is a constant velocity gain (the 'k7=' runs: the same k_d at every K6), force axes
+    add the force task; without them the shipped integral stays on."""
     info = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
     shipped = ex._control_config(info, 0.1, ())
     off = ex._control_config(info, 0.1, ex.FORCE_AXES, k_iq=0.0)
     assert shipped.joint_vector("k_iq")[:6].min() > 0 and shipped.force is None
     assert not off.joint_vector("k_iq").any() and off.force.axes == ex.FORCE_AXES
     np.testing.assert_allclose(off.joint_vector("k_s"), shipped.joint_vector("k_s"))
+    k_s_at_1 = ex._control_config(info, 1.0, ()).joint_vector("k_s")
+    np.testing.assert_allclose(k_s_at_1, 10.0 * shipped.joint_vector("k_s"))
+    constant = ex._control_config(info, 0.1, (), k7=0.002).joint_vector("k_d")
+    np.testing.assert_allclose(constant, ex._control_config(info, 1.0, (), k7=0.002).joint_vector("k_d"))
+    assert constant[:6].min() > 0 and not np.allclose(constant, shipped.joint_vector("k_d"))

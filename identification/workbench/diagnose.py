@@ -271,7 +271,7 @@ def probe_columns(signals, u: np.ndarray) -> dict[str, np.ndarray]:
     if signals.dt is not None:
         cols = []
         for lag in (0.002, 0.005, 0.01, 0.02, 0.04):
-            k = max(1, int(round(lag / signals.dt)))
+            k = ticks(lag, signals.dt)
             cols += [delayed(u, k) - u, np.concatenate([u[k:], np.full(k, u[-1])]) - u]
             if "q_des" in signals:
                 cols.append(signals["q_des"] - delayed(signals["q_des"], k))

@@ -63,8 +63,8 @@ from .signals import (
     hysteresis,
     lowpass,
     lowpass_gain,
-    run_onsets,
     sign_latch,
+    since_onset,
     ticks,
 )
 
@@ -196,10 +196,8 @@ def _deadzone_crossing(s: Signals, band: float, damping_share: float) -> tuple[n
     m = s["u"] - damping_share * s["u_v"]
     outside = hysteresis(np.abs(m), DZ_RELEASE * band, band)
     inside = ~outside
-    lead = command_lead(s)
-    entry = run_onsets(inside)
     edge = np.where(inside, sign_latch(m, outside), np.sign(m))
-    return edge, np.where(inside, lead - lead[np.maximum(entry, 0)], 0.0)
+    return edge, since_onset(command_lead(s), inside)
 
 
 def _deadzone_columns(
@@ -326,9 +324,7 @@ def saturation(s: Signals, tau_sat: float, beta: float, release: float = 0.8) ->
     term resets the model to the error it measured when the limit was reached (output-error form).
     """
     flag = hysteresis(np.abs(motor_torque_proxy(s, beta)), tau_sat, release * tau_sat)
-    lead = command_lead(s)
-    onset = run_onsets(flag)
-    return np.where(flag, lead - lead[np.maximum(onset, 0)], 0.0)
+    return since_onset(command_lead(s), flag)
 
 
 _SAT_LEVELS = (0.7, 0.8, 0.9, 0.95, 0.97, 0.99)  # quantiles of the proxy: the limit may hold up to 30 % of a log
@@ -385,6 +381,11 @@ class _StictionOnline:
         self.z = self._z(x["dq"])
 
 
+def _lead(x: Mapping[str, float], q_des_prev: float | None) -> float:
+    """:func:`command_lead` of one sample: the last tick's command (this tick's on the first) minus ``q``."""
+    return (x["q_des"] if q_des_prev is None else q_des_prev) - x["q"]
+
+
 class _DeadzoneOnline:
     """``deadzone`` on-line: the step, the latch of the sign of the last effort beyond the band and, in the
     crossing form, the last command and the lead at the entry into the band."""
@@ -401,9 +402,6 @@ class _DeadzoneOnline:
     def _m(self, x: Mapping[str, float]) -> float:
         return x["u"] - self.share * x["u_v"]
 
-    def _lead(self, x: Mapping[str, float]) -> float:
-        return (x["q_des"] if self.q_des_prev is None else self.q_des_prev) - x["q"]
-
     def _outside(self, m: float) -> bool:
         if not self.crossing:
             return abs(m) > self.band
@@ -415,8 +413,9 @@ class _DeadzoneOnline:
         if self.crossing:
             if outside:
                 return math.copysign(1.0, m)
-            lead = self._lead(x) - (self.entry_lead if self.inside else self._lead(x))
-            return self.z + (lead / self.width if self.width else 0.0)
+            if not self.inside or not self.width:  # entering the band at this tick, or the edge alone
+                return self.z
+            return self.z + (_lead(x, self.q_des_prev) - self.entry_lead) / self.width
         step = min(1.0, max(-1.0, m / self.band))
         if self.v_th <= 0.0:
             return step
@@ -429,7 +428,7 @@ class _DeadzoneOnline:
         if self.outside:
             self.z = math.copysign(1.0, m)
         elif self.crossing and not self.inside:
-            self.entry_lead = self._lead(x)
+            self.entry_lead = _lead(x, self.q_des_prev)
         self.inside = not self.outside
         if self.crossing:
             self.q_des_prev = x["q_des"]
@@ -535,13 +534,12 @@ class _SaturationOnline:
     def value(self, x: Mapping[str, float]) -> float:
         if not (self.saturated and self._saturated(x)):
             return 0.0  # below the limit, or its onset (this tick's command is not read)
-        return self.q_des_prev - x["q"] - self.onset_lead
+        return _lead(x, self.q_des_prev) - self.onset_lead
 
     def commit(self, x: Mapping[str, float]) -> None:
         sat = self._saturated(x)
         if sat and not self.saturated:
-            prev = x["q_des"] if self.q_des_prev is None else self.q_des_prev
-            self.onset_lead = prev - x["q"]
+            self.onset_lead = _lead(x, self.q_des_prev)
         self.saturated = sat
         self.q_des_prev = x["q_des"]
 

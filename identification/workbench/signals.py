@@ -139,6 +139,11 @@ def run_onsets(flag: np.ndarray) -> np.ndarray:
     return out
 
 
+def since_onset(x: np.ndarray, flag: np.ndarray) -> np.ndarray:
+    """``x - x[onset]`` where ``flag`` is True, ``onset`` the first sample of the run it belongs to; 0 elsewhere."""
+    return np.where(flag, x - x[np.maximum(run_onsets(flag), 0)], 0.0)
+
+
 def hysteresis(x: np.ndarray, on: float, off: float) -> np.ndarray:
     """A detector with hysteresis: True from the first ``x > on`` until ``x <= off`` (``off <= on``).
 
