@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from servotau.apps.viewer import RerunStream, open_recording
 from servotau.control.app import run_session
 from servotau.hal.factory import open_backend
 from servotau.hal.log import LogReader
-from servotau.viewer import RerunStream, open_recording
 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]
 

@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from servotau.apps.operator_script import write_sim_setup
 from servotau.cli import main as cli
 from servotau.config import REPO_ROOT
 from servotau.hal.log import LogReader, parts_dir
 from servotau.identification import MotorParameters
-from servotau.identification.operator_script import write_sim_setup
 from servotau.identification.plan import load_plan
 
 PYTHON = str(REPO_ROOT / ".venv" / "bin" / "python") if (REPO_ROOT / ".venv").exists() else sys.executable
