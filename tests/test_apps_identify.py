@@ -1,4 +1,4 @@
-"""Tests of `servotau identify collect|fit` (identification/app.py): the command line end to end on the
+"""Tests of `servotau identify collect|fit` (servotau/apps/identify.py): the command line end to end on the
 inprocess backend (subprocesses), its JSON and motor file, Ctrl-C, and its errors on bad input."""
 
 import json
