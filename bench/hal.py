@@ -52,9 +52,9 @@ ROOT = Path(__file__).resolve().parent.parent
 TESTS = ROOT / "tests"
 sys.path.insert(0, str(TESTS))
 
+from servotau.apps.processes import free_port, stop_process, wait_ready  # noqa: E402
 from servotau.hal import ZenohBackend  # noqa: E402
 from servotau.hal.protocol import decode_frame, encode_frame  # noqa: E402
-from servotau.processes import free_port, stop_process, wait_ready  # noqa: E402
 
 
 @contextmanager

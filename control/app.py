@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from servotau.apps.viewer import RerunStream, open_recording
 from servotau.errors import HalError
-from servotau.viewer import RerunStream, open_recording
 
 from .trajectory import TrajectoryPoint, right_leg_swing
 

@@ -218,7 +218,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
                                                   motors, velocity_feedforward, k_iq))
     stream = None
     if rerun:
-        from servotau.viewer import RerunStream, open_recording
+        from servotau.apps.viewer import RerunStream, open_recording
 
         rec = open_recording(rerun, app_id=f"servotau-{name}")
         stream = RerunStream(rec, info.joint_names, info.model_path) if rec is not None else None

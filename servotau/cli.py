@@ -16,17 +16,26 @@ from servotau.errors import ServotauError
 
 # command -> module providing register(subparsers)
 COMMANDS = {
-    "sim": "servotau.simrobot.app",
+    "sim": "servotau.apps.sim",
     "control": "servotau.control.app",
-    "demo": "servotau.demo",
-    "identify": "servotau.identification.app",
-    "model": "servotau.identification.workbench.app",
+    "demo": "servotau.apps.demo",
+    "identify": "servotau.apps.identify",
+    "model": "servotau.apps.model",
     "experiment": "servotau.control.experiments",
 }
 
 
+EXIT_CODES = """exit codes:
+  0    success
+  2    error: bad input, configuration or file (the message says what was expected)
+  3    safety trip: servotau control stopped and held position
+  4    robot lost: servotau control lost the connection to the robot
+  130  interrupted (Ctrl-C)"""
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="servotau", description="Torque control without joint-torque sensors.")
+    parser = argparse.ArgumentParser(prog="servotau", description="Torque control without joint-torque sensors.",
+                                     epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, module in COMMANDS.items():

@@ -10,8 +10,8 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
+from servotau.apps.processes import free_port, stop_process, wait_ready
 from servotau.errors import HalError
-from servotau.processes import free_port, stop_process, wait_ready
 
 __all__ = ["ENV", "controller", "endpoint", "free_port", "robot_server", "stop_process"]
 

@@ -72,7 +72,7 @@ def _source_key() -> str:
     h = hashlib.sha256(f"cycle_s={CYCLE_S}".encode())
     files = sorted((REPO_ROOT / "simrobot").rglob("*.py")) + sorted((REPO_ROOT / "simrobot").rglob("*.xml"))
     files += [CONFIG_DIR / "servo.toml", CONFIG_DIR / "sensors.toml", CONFIG_DIR / "scenarios" / "hanging.toml",
-              REPO_ROOT / "identification" / "workbench" / "simlog.py"]
+              REPO_ROOT / "servotau" / "apps" / "simlog.py"]
     for f in files:
         h.update(f.name.encode())
         h.update(f.read_bytes())
@@ -92,7 +92,7 @@ def _path(name: str, key: str, hidden: dict) -> Path:
 
 
 def _load_or_simulate(name: str, key: str, hidden: dict | None = None) -> dict[str, np.ndarray]:
-    from servotau.identification.workbench.simlog import ExcitationPlan, simulate_log
+    from servotau.apps.simlog import ExcitationPlan, simulate_log
 
     name = LOG_OF.get(name, name)
     hidden = CASES[name] if hidden is None else hidden

@@ -1,8 +1,8 @@
 """Model workbench: compare the actuator model with measurements, see where it fails, name the missing
 physical effect, add it and watch the held-out error fall (docs/workbench.md).
 
-Plotting (:mod:`.report`), Rerun (:mod:`.rerun_view`) and the simulator (:mod:`.simlog`) are imported
-only when used.
+Plotting (:mod:`.report`) is imported only when used. The command line, its Rerun views and the simulated
+logs are applications (:mod:`servotau.apps.model`, :mod:`servotau.apps.model_rerun`, :mod:`servotau.apps.simlog`).
 """
 
 from . import library as _library  # noqa: F401  (registers the built-in effects)

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from servotau.errors import IdentificationError
+from servotau.simrobot.scenario import OperatorPush
+from servotau.simrobot.sim import SimConfig, SimRobot
 
 log = logging.getLogger(__name__)
 
@@ -79,9 +81,6 @@ def simulate_log(
         Columns ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], ``segment``, ``true/tau``,
         ``true/dq``, ``true/current``, ``true/q`` [rad] (link side), one row per 1 ms tick.
     """
-    from servotau.simrobot.scenario import OperatorPush  # the simulator is optional for the workbench
-    from servotau.simrobot.sim import SimConfig, SimRobot
-
     plan = plan or ExcitationPlan()
     overrides = {name: {**dict(params), "joints": [joint]} for name, params in (effects or {}).items()}
     robot = SimRobot(SimConfig.named("hanging", effects=overrides or None, seed=seed))

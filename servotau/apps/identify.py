@@ -1,22 +1,21 @@
-"""``servotau identify``: collect actuator-identification data on a robot, fit the motor parameters.
-
-::
+"""servotau identify: collect actuator-identification data on a robot, fit the motor parameters.
 
     servotau identify collect --out runs/ident.parquet [--hal hal.toml --backend inprocess|zenoh --port N]
                               [--plan identification.toml] [--joints RLEG_JOINT0,...] [--sim-config ...]
     servotau identify fit runs/ident.parquet [--joints ...] [--loss asymmetric|least_squares] [--w 100]
                           [--two-stage] [--out config/motors/identified.toml] [--json]
 
-``collect`` plays the plan (settle, high-velocity sweeps, high-torque holds; paper section 3.4) on any
+collect plays the plan (settle, high-velocity sweeps, high-torque holds; paper section 3.4) on any
 HAL backend and writes the project's Parquet log; on the inprocess backend the simulated robot is
-built from ``--sim-config`` (default ``config/sim_identification.toml``: the hanging robot whose
-scripted operator pushes the right foot during the plan's holds). ``fit`` estimates dq and tau
-off-line from the log's sensors (non-causal, centred filters; never the ground truth), fits every
-joint and writes the motor-parameter file that ``control/`` reads. See docs/identification.md.
+built from --sim-config (default config/sim_identification.toml: the hanging robot whose scripted
+operator pushes the right foot during the plan's holds). fit estimates dq and tau off-line from the
+log's sensors (non-causal, centred filters; never the ground truth), fits every joint and writes the
+motor-parameter file that the controller reads. See docs/identification.md.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -28,7 +27,8 @@ DEFAULT_MOTORS = "config/motors/identified.toml"  # in the repository (control.t
 
 
 def register(sub) -> None:
-    p = sub.add_parser("identify", help="actuator identification: collect data, fit k_tau and k_v (paper sec. 3)")
+    p = sub.add_parser("identify", help="actuator identification: collect data, fit k_tau and k_v (paper sec. 3)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     cmds = p.add_subparsers(dest="identify_command", required=True, metavar="STEP")
 
     c = cmds.add_parser("collect", help="run the collection plan on a HAL backend and record a Parquet log")
@@ -45,7 +45,7 @@ def register(sub) -> None:
     c.set_defaults(func=collect_main)
 
     f = cmds.add_parser("fit", help="fit the actuator model of each joint on a collected log")
-    f.add_argument("log", help="Parquet log from `servotau identify collect` (or any log with q_des)")
+    f.add_argument("log", help="Parquet log from servotau identify collect (or any log with q_des)")
     f.add_argument("--joints", help="comma-separated joints to fit (default: the swept joints of the log)")
     f.add_argument("--plan", default="identification.toml", help="plan file whose [fit] table gives the defaults")
     f.add_argument("--loss", choices=("asymmetric", "least_squares"), help="loss of the written fit")
@@ -82,10 +82,10 @@ def hal_for_collection(hal: str, backend: str | None, sim_config: str) -> tuple[
 
 def collect_main(args) -> int:
     from servotau.hal.factory import open_backend
+    from servotau.identification.plan import check_joints, load_plan, parse_joints
+    from servotau.identification.session import run_collection
 
     from .operator_script import check_timing
-    from .plan import check_joints, load_plan, parse_joints
-    from .session import run_collection
 
     plan, _ = load_plan(args.plan)
     section, name = hal_for_collection(args.hal, args.backend, args.sim_config)
@@ -122,9 +122,9 @@ def collect_main(args) -> int:
 def fit_main(args) -> int:
     from dataclasses import replace
 
-    from .loss import Loss
-    from .pipeline import fit_log, write_motor_file
-    from .plan import load_plan, parse_joints
+    from servotau.identification.loss import Loss
+    from servotau.identification.pipeline import fit_log, write_motor_file
+    from servotau.identification.plan import load_plan, parse_joints
 
     _, settings = load_plan(args.plan)
     if args.w is not None and (args.loss or settings.loss.kind) == "least_squares":

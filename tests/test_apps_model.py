@@ -1,4 +1,4 @@
-"""Tests of ``servotau model compare|diagnose|add`` (identification/workbench/app.py), report and Rerun."""
+"""Tests of ``servotau model compare|diagnose|add`` (servotau/apps/model.py), report and Rerun."""
 
 import json
 

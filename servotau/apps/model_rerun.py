@@ -12,11 +12,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .data import Dataset
-from .diagnose import Diagnosis
-from .evaluate import Comparison
-from .ladder import Ladder
-from .views import residual_views
+from servotau.identification.workbench.data import Dataset
+from servotau.identification.workbench.diagnose import Diagnosis
+from servotau.identification.workbench.evaluate import Comparison
+from servotau.identification.workbench.ladder import Ladder
+from servotau.identification.workbench.views import residual_views
 
 URAD = 1e6
 MAX_POINTS = 5000

@@ -1,22 +1,24 @@
-"""``servotau demo``: the robot process and the controller process, as a user would start them.
+"""servotau demo: the robot process and the controller process, as a user would start them.
 
-Starts ``servotau sim`` (lock-step, loopback, a free port), then ``servotau control`` (torque mode,
-right-leg swing) against it over Zenoh, records ``demo.rrd`` (Rerun) and ``log.parquet``, stops the
+Starts servotau sim (lock-step, loopback, a free port), then servotau control (torque mode,
+right-leg swing) against it over Zenoh, records demo.rrd (Rerun) and log.parquet, stops the
 robot process and prints a summary. Exits by itself.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
 from pathlib import Path
 
-from servotau.processes import free_port, stop_process, wait_ready
+from servotau.apps.processes import free_port, stop_process, wait_ready
 
 
 def register(sub) -> None:
-    p = sub.add_parser("demo", help="sim robot process + controller process + Rerun recording")
+    p = sub.add_parser("demo", help="sim robot process + controller process + Rerun recording",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="runs/demo", help="output folder")
     p.add_argument("--mode", choices=("position", "torque"), default="torque")
     p.add_argument("--duration", type=float, default=3.0, help="swing duration [s]")

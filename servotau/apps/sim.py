@@ -1,4 +1,4 @@
-"""``servotau sim``: the simulated HRP-2 as a robot process, served over Zenoh through the HAL.
+"""servotau sim: the simulated HRP-2 as a robot process, served over Zenoh through the HAL.
 
 The process speaks only the HAL protocol (docs/protocol.md), like a real-robot bridge would; ground
 truth travels on its own key for evaluation. Stop it with Ctrl-C or SIGTERM.
@@ -6,12 +6,14 @@ truth travels on its own key for evaluation. Stop it with Ctrl-C or SIGTERM.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 from pathlib import Path
 
 
 def register(sub) -> None:
-    p = sub.add_parser("sim", help="serve the simulated HRP-2 over Zenoh (the robot process)")
+    p = sub.add_parser("sim", help="serve the simulated HRP-2 over Zenoh (the robot process)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", default="sim.toml", help="simulation config (scenario, servo, sensors, seed)")
     p.add_argument("--hal", default="hal.toml", help="HAL config ([hal.server] and [hal.safety])")
     p.add_argument("--port", type=int, help="listen on tcp/127.0.0.1:PORT (overrides [hal.server] listen)")
@@ -26,8 +28,7 @@ def register(sub) -> None:
 def main(args) -> int:
     from servotau.hal.factory import server_config
     from servotau.hal.server import serve
-
-    from .sim import SimConfig, SimRobot
+    from servotau.simrobot.sim import SimConfig, SimRobot
 
     sim_config = SimConfig.from_toml(args.config)
     if args.seed is not None:

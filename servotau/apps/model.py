@@ -1,15 +1,13 @@
-"""``servotau model compare|diagnose|add``: the model workbench on the command line.
-
-::
+"""servotau model compare|diagnose|add|simulate: the model workbench on the command line.
 
     servotau model compare  LOG [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
     servotau model diagnose LOG [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
     servotau model add      LOG [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml]
     servotau model simulate OUT.parquet [--hidden EFFECT ...] [--cycles 4] [--seed 0]
 
-Common options: ``--map ROLE=COLUMN`` (column roles for other tables), ``--loss least_squares|asymmetric``
-with ``--w``, ``--folds``, ``--plugin FILE.py`` (registers user effects), ``--report DIR`` (HTML + PNG),
-``--rerun save:FILE|connect:ADDR|spawn``, ``--json`` (one JSON object on stdout). Progress goes to stderr.
+Common options: --map ROLE=COLUMN (column roles for other tables), --loss least_squares|asymmetric
+with --w, --folds, --plugin FILE.py (registers user effects), --report DIR (HTML + PNG),
+--rerun save:FILE|connect:ADDR|spawn, --json (one JSON object on stdout). Progress goes to stderr.
 """
 
 from __future__ import annotations
@@ -22,15 +20,14 @@ import time
 from pathlib import Path
 
 from servotau.errors import IdentificationError
-
-from ..loss import Loss
-from . import library as _library  # noqa: F401  (registers the built-in effects)
-from .data import OFFLINE_ESTIMATE, ROLES, align_torque, describe, load_dataset
-from .diagnose import MIN_GAIN, diagnose
-from .effects import effect_names
-from .evaluate import DEFAULT_FOLDS, compare, folds_of
-from .ladder import add_effects, save_model
-from .model import FittedModel, parse_spec
+from servotau.identification.loss import Loss
+from servotau.identification.workbench import library as _library  # noqa: F401  (registers the built-in effects)
+from servotau.identification.workbench.data import OFFLINE_ESTIMATE, ROLES, align_torque, describe, load_dataset
+from servotau.identification.workbench.diagnose import MIN_GAIN, diagnose
+from servotau.identification.workbench.effects import effect_names
+from servotau.identification.workbench.evaluate import DEFAULT_FOLDS, compare, folds_of
+from servotau.identification.workbench.ladder import add_effects, save_model
+from servotau.identification.workbench.model import FittedModel, parse_spec
 
 
 def register(subparsers) -> None:
@@ -65,9 +62,9 @@ def register(subparsers) -> None:
 
 
 def run_simulate(args: argparse.Namespace) -> int:
+    from servotau.identification.workbench.data import write_table
     from servotau.simrobot.servo import EFFECTS
 
-    from .data import write_table
     from .simlog import ExcitationPlan, simulate_log
 
     unknown = [e for e in args.hidden if e not in EFFECTS]
@@ -155,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     comparison = diagnosis = ladder = None
     if args.model_command == "compare":
         if args.model:
-            from ..motor_params import MotorParameters
+            from servotau.identification.motor_params import MotorParameters
 
             params = MotorParameters.load_toml(args.model)
             joint = ds.joint or (next(iter(params)) if len(params) == 1 else None)
@@ -245,15 +242,14 @@ def _clean(x):
 
 
 def _report(out_dir, ds, comparison, diagnosis, ladder, summary):
-    from .report import write_report
+    from servotau.identification.workbench.report import write_report
 
     return write_report(out_dir, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder, summary=summary)
 
 
 def _rerun(target: str, ds, comparison, diagnosis, ladder) -> None:
-    from servotau.viewer import open_recording
-
-    from .rerun_view import log_to_rerun
+    from .model_rerun import log_to_rerun
+    from .viewer import open_recording
 
     rec = open_recording(target, app_id="servotau_model")
     log_to_rerun(rec, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder)

@@ -1,4 +1,4 @@
-"""servotau.processes: readiness of a child process and a stop that always ends it."""
+"""servotau.apps.processes: readiness of a child process and a stop that always ends it."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
+from servotau.apps.processes import free_port, stop_process, wait_ready
 from servotau.errors import HalError
-from servotau.processes import free_port, stop_process, wait_ready
 
 
 def test_wait_ready_reports_a_child_that_exits_before_serving(tmp_path):

@@ -1,4 +1,4 @@
-"""Tests of `servotau identify collect|fit` (identification/app.py): the command line end to end on the
+"""Tests of `servotau identify collect|fit` (servotau/apps/identify.py): the command line end to end on the
 inprocess backend (subprocesses), its JSON and motor file, Ctrl-C, and its errors on bad input."""
 
 import json
@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from servotau.apps.operator_script import write_sim_setup
 from servotau.cli import main as cli
 from servotau.config import REPO_ROOT
 from servotau.hal.log import LogReader, parts_dir
 from servotau.identification import MotorParameters
-from servotau.identification.operator_script import write_sim_setup
 from servotau.identification.plan import load_plan
 
 PYTHON = str(REPO_ROOT / ".venv" / "bin" / "python") if (REPO_ROOT / ".venv").exists() else sys.executable

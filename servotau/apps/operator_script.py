@@ -22,9 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from servotau.identification.plan import CollectionPlan
 from servotau.simrobot.scenario import OperatorPush
-
-from .plan import CollectionPlan
 
 BODY = "RLEG_FOOT"  # beyond the right ankle F/T sensor: the estimator sees the push
 MARGIN = 0.25  # [s] of each hold window left without push at each end (of a 6 s window; scaled)
