@@ -9,14 +9,19 @@ path, so that every error names the file, the field and the expected value::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
+import types
+import typing
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from .errors import ConfigError
+from .errors import ConfigError, ServotauError
+
+T = TypeVar("T")
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "config"
@@ -157,3 +162,163 @@ class Section:
         for key in self.data:
             if key not in allowed:
                 raise self.error(key, self.data[key], f"a known field, one of {allowed}")
+
+
+# -- dataclasses from TOML sections ------------------------------------------------------------------
+# A config dataclass declares each field once, with its default, unit and bounds, by ``setting(...)``.
+# ``load_dataclass`` reads a TOML section into it (errors name the file and the dotted field) and
+# ``check_settings`` validates a directly built instance against the same metadata (errors of the
+# caller's own type, e.g. ControlError), so no default or bound is written twice.
+
+_SETTING = "servotau.setting"
+
+
+@dataclass(frozen=True)
+class _Spec:
+    unit: str
+    min: float | None
+    max: float | None
+    strict_min: bool
+    choices: tuple[str, ...] | None
+
+
+def setting(
+    default: Any = _MISSING,
+    *,
+    unit: str = "",
+    min: float | None = None,
+    max: float | None = None,
+    strict_min: bool = False,
+    choices: Iterable[str] | None = None,
+) -> Any:
+    """A dataclass field whose default, unit ``[unit]`` and bounds the config loader reads.
+
+    Args:
+        default: The default value (immutable); omitted for a required field.
+        unit: SI unit shown in error messages, e.g. ``"rad/s"``.
+        min, max: Bounds of a number or of every element of a tuple of numbers.
+        strict_min: The lower bound is strict (``> min``).
+        choices: The allowed strings.
+    """
+    spec = _Spec(unit, min, max, strict_min, tuple(choices) if choices is not None else None)
+    kwargs = {} if default is _MISSING else {"default": default}
+    return dataclasses.field(metadata={_SETTING: spec}, **kwargs)
+
+
+def _spec(f: dataclasses.Field) -> _Spec:
+    return f.metadata.get(_SETTING) or _Spec("", None, None, False, None)
+
+
+def _expected(kind: str, spec: _Spec) -> str:
+    parts = [kind]
+    if spec.choices is not None:
+        return f"one of {list(spec.choices)}"
+    if spec.min is not None:
+        parts.append(f"{'>' if spec.strict_min else '>='} {spec.min:g}")
+    if spec.max is not None:
+        parts.append(f"<= {spec.max:g}")
+    return " ".join(parts) + (f" [{spec.unit}]" if spec.unit else "")
+
+
+def _number_ok(value: Any, spec: _Spec) -> bool:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return False
+    if spec.min is not None and (value < spec.min or (spec.strict_min and value == spec.min)):
+        return False
+    return spec.max is None or value <= spec.max
+
+
+def _convert(value: Any, tp: Any, spec: _Spec) -> tuple[Any, str | None]:
+    """``value`` converted to the annotated type ``tp``, or ``(value, expected)`` when it does not fit."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (types.UnionType, typing.Union):
+        if value is None and type(None) in args:
+            return None, None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _convert(value, inner, spec)
+    if tp is float:
+        return (float(value), None) if _number_ok(value, spec) else (value, _expected("a finite number", spec))
+    if tp is int:
+        ok = isinstance(value, int) and not isinstance(value, bool) and _number_ok(value, spec)
+        return (value, None) if ok else (value, _expected("an integer", spec))
+    if tp is bool:
+        return (value, None) if isinstance(value, bool) else (value, "true or false")
+    if tp is str:
+        ok = isinstance(value, str) and (spec.choices is None or value in spec.choices)
+        return (value, None) if ok else (value, _expected("a string", spec))
+    if origin is tuple:
+        variadic = len(args) == 2 and args[1] is Ellipsis
+        item_tp = args[0]
+        noun = {float: "finite numbers", int: "integers", str: "strings"}.get(item_tp, "values")
+        kind = f"a list of {noun}" if variadic else f"a list of {len(args)} {noun}"
+        expected = _expected(kind, spec) if spec.choices is None else f"a list of {noun} among {list(spec.choices)}"
+        if not isinstance(value, (list, tuple)) or (not variadic and len(value) != len(args)):
+            return value, expected
+        out = []
+        for v in value:
+            conv, err = _convert(v, item_tp, spec)
+            if err is not None:
+                return value, expected
+            out.append(conv)
+        return tuple(out), None
+    raise TypeError(f"setting type {tp!r} is not supported by the config loader")
+
+
+def _fields(cls: type) -> list[tuple[dataclasses.Field, Any]]:
+    hints = typing.get_type_hints(cls)
+    return [(f, hints[f.name]) for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
+
+
+def load_dataclass(cls: type[T], section: Section, *, ignore: Iterable[str] = (), **given: Any) -> T:
+    """Build the config dataclass ``cls`` from a TOML section.
+
+    Every field of ``cls`` is read from the key of the same name, converted to its annotated type
+    (float, int, bool, str, tuples of these, ``X | None``, or a nested config dataclass read from a
+    sub-table) and checked against its :func:`setting` bounds; a missing key takes the field's default.
+    Unknown keys are refused, except ``ignore`` (keys another reader owns). ``given`` supplies fields
+    the caller computes itself (they are not read from the file).
+
+    Raises:
+        ConfigError: Naming the file, the dotted field, the value and the expected value and unit.
+    """
+    known = {f.name for f, _ in _fields(cls)}
+    section.check_keys(known | set(ignore))
+    kwargs = dict(given)
+    for f, tp in _fields(cls):
+        if f.name in given:
+            continue
+        if f.name not in section:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise section.error(f.name, _MISSING, _expected("a value", _spec(f)))
+            continue
+        if dataclasses.is_dataclass(tp):
+            kwargs[f.name] = load_dataclass(tp, section.section(f.name))
+            continue
+        value, expected = _convert(section.data[f.name], tp, _spec(f))
+        if expected is not None:
+            raise section.error(f.name, value, expected)
+        kwargs[f.name] = value
+    try:
+        return cls(**kwargs)
+    except ServotauError as exc:
+        where = f" [{section.prefix}]" if section.prefix else ""
+        raise ConfigError(f"{section.file}{where}: {exc}") from exc
+
+
+def check_settings(obj: Any, error: type[Exception] = ConfigError) -> None:
+    """Validate a directly built config dataclass against its :func:`setting` metadata (in place:
+    numbers become float, lists become tuples). Call it from ``__post_init__``.
+
+    Raises:
+        error: ``"<Class>.<field> = <value>: expected <what> [unit]"``.
+    """
+    for f, tp in _fields(type(obj)):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(tp):
+            if not isinstance(value, tp):
+                raise error(f"{type(obj).__name__}.{f.name} = {value!r}: expected a {tp.__name__}")
+            continue
+        conv, expected = _convert(value, tp, _spec(f))
+        if expected is not None:
+            raise error(f"{type(obj).__name__}.{f.name} = {value!r}: expected {expected}")
+        object.__setattr__(obj, f.name, conv)
