@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 from servotau.config import CONFIG_DIR
-from servotau.hal.factory import open_backend
+from servotau.hal.registry import open_backend
 from servotau.identification import MotorParameters
 from servotau.identification.app import DEFAULT_SIM_CONFIG, hal_for_collection
 from servotau.identification.pipeline import fit_log

@@ -24,8 +24,8 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    from servotau.hal.factory import server_config
-    from servotau.hal.server import serve
+    from servotau.hal.robot.config import server_config
+    from servotau.hal.robot.server import serve
 
     from .sim import SimConfig, SimRobot
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from servotau.control.app import run_session
-from servotau.hal.factory import open_backend
 from servotau.hal.log import LogReader
+from servotau.hal.registry import open_backend
 from servotau.viewer import RerunStream, open_recording
 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]

@@ -10,8 +10,8 @@ import pytest
 
 from servotau.config import CONFIG_DIR
 from servotau.errors import ConfigError, IdentificationError
-from servotau.hal.factory import open_backend
 from servotau.hal.log import LogReader
+from servotau.hal.registry import open_backend
 from servotau.identification.app import hal_for_collection
 from servotau.identification.collect import HoldPlan, SweepPlan
 from servotau.identification.operator_script import check_timing, write_sim_setup

@@ -120,7 +120,7 @@ def test_servotau_log_with_only_the_ground_truth_torque_is_an_error_not_a_silent
 @pytest.fixture(scope="module")
 def collected_log(tmp_path_factory):
     """A 7 s simulated identification collection of the knee (sensors and ground truth, no estimate)."""
-    from servotau.hal.factory import open_backend
+    from servotau.hal.registry import open_backend
     from servotau.identification.app import hal_for_collection
     from servotau.identification.collect import HoldPlan, SweepPlan
     from servotau.identification.operator_script import write_sim_setup
