@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from servotau.hal import realtime
 from servotau.hal.errors import HalError
+from servotau.hal.robot import realtime
 
 
 @pytest.mark.parametrize("bad", [-1, 100, 1.5, True, "50"])
