@@ -4,7 +4,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from servotau.description import JOINT_NAMES, MODEL_PATH, load_pinocchio
+from servotau.description import FT_FRAMES, JOINT_NAMES, MODEL_PATH, load_pinocchio
 from servotau.errors import EstimationError
 from servotau.estimation.config import EstimatorConfig, ModelPerturbation
 from servotau.estimation.model import (
@@ -62,7 +62,7 @@ def test_bodies_beyond_the_sensors_are_the_foot_and_the_hand_with_its_gripper():
 def test_split_model_has_the_same_dynamics():
     """Splitting the bodies beyond the sensors onto locked joints changes no torque, frame or mass."""
     original = load_pinocchio(MODEL_PATH)
-    frames = {s: f"ft_{s}" for s in ("right_ankle", "left_ankle", "right_wrist", "left_wrist")}
+    frames = dict(FT_FRAMES)
     split, locked = split_sensor_bodies(original, frames)
     assert split.nv == original.nv + 4 and len(locked) == 4
     rng = np.random.default_rng(5)
