@@ -6,7 +6,7 @@ Usage:
     python bench/hal.py --robot servotau.simrobot.sim:SimRobot.from_config --scenario sim.toml
 
 The robot process is ``python -m servotau.hal`` (the HAL server) on tcp/127.0.0.1 (a free port),
-serving tests/fake_robot.py's FakeRobot (30 joints) unless ``--robot`` names another factory; the
+serving servotau.simrobot.fake's FakeRobot (30 joints) unless ``--robot`` names another factory; the
 controller (this process) reads a frame and writes 30 desired angles by name every tick (no ground
 truth: a pure controller).
 
@@ -18,7 +18,7 @@ truth: a pure controller).
 - ``realtime_late_fraction``: real-time mode (1 kHz), fraction of ticks starting more than one
   period late, over ``--duration`` seconds.
 - ``*_fifo50``: the same figures with both processes under SCHED_FIFO priority 50
-  (``realtime_priority``, hal/realtime.py; as a robot's control loop runs), if the user may.
+  (``realtime_priority``, hal/robot/realtime.py; as a robot's control loop runs), if the user may.
 - ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
 - ``baseline_rtt_p50_us`` / ``_p99_us``: a bare Zenoh Python ping-pong with the same sizes,
   settings and threading (bench/zenoh_pingpong.py, ``channel``), in the same run;
@@ -48,13 +48,12 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-TESTS = ROOT / "tests"
-sys.path.insert(0, str(TESTS))
+from servotau.hal import ZenohBackend
+from servotau.hal.wire.protocol import decode_frame, encode_frame
+from servotau.apps.processes import free_port, stop_process, wait_ready
+from servotau.simrobot.fake import FakeRobot
 
-from servotau.apps.processes import free_port, stop_process, wait_ready  # noqa: E402
-from servotau.hal import ZenohBackend  # noqa: E402
-from servotau.hal.protocol import decode_frame, encode_frame  # noqa: E402
+FAKE_ROBOT = "servotau.simrobot.fake:FakeRobot"
 
 
 @contextmanager
@@ -66,8 +65,7 @@ def _server(robot: str, scenario: str | None, clock: str, priority: int = 0):
                 "--clock", clock, "--ready-file", str(ready), "--realtime-priority", str(priority)]
         if scenario:
             args += ["--scenario", scenario]
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
-        p = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             wait_ready(p, ready, 30.0, f"robot server ({' '.join(args)})")
             with ZenohBackend(_robot_name(robot, scenario), connect=[f"tcp/127.0.0.1:{port}"], truth=False,
@@ -80,7 +78,7 @@ def _server(robot: str, scenario: str | None, clock: str, priority: int = 0):
 def _robot_name(robot: str, scenario: str | None) -> str:
     from servotau.hal import import_object
 
-    if robot == "fake_robot:FakeRobot":
+    if robot == FAKE_ROBOT:
         return "fake"
     factory = import_object(robot)
     return (factory(scenario) if scenario else factory()).info.name
@@ -147,8 +145,6 @@ def bench_baseline(ticks: int, pattern: str = "channel", zenoh_runtime: str | No
 
 
 def bench_codec() -> dict:
-    from fake_robot import FakeRobot
-
     frame = FakeRobot().read()
     buf = encode_frame(frame)
     n = 20_000
@@ -162,7 +158,7 @@ def main() -> int:
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     ap.add_argument("--duration", type=float, default=60.0, help="real-time part [s] (default 60)")
     ap.add_argument("--ticks", type=int, default=5000, help="lock-step ticks (default 5000)")
-    ap.add_argument("--robot", default="fake_robot:FakeRobot", help="robot factory 'module:callable'")
+    ap.add_argument("--robot", default=FAKE_ROBOT, help="robot factory 'module:callable'")
     ap.add_argument("--scenario", help="config path passed to the robot factory")
     ap.add_argument("--fifo", type=int, default=50,
                     help="also run both parts with both processes under SCHED_FIFO at this priority (0: skip; "
@@ -179,7 +175,7 @@ def main() -> int:
     out["rtt_p99_ratio_to_baseline"] = out["rtt_p99_us"] / out["baseline_rtt_p99_us"]
     for q in ("p50", "p99"):  # > 1: the HAL's channel pattern saves that much over a callback thread
         out[f"threads_to_channel_{q}_ratio"] = out[f"baseline_threads_rtt_{q}_us"] / out[f"baseline_rtt_{q}_us"]
-    # > 1: the HAL's zenoh runtime layout (hal/zenoh_session.py ZENOH_RUNTIME) saves that much robot-side CPU
+    # > 1: the HAL's zenoh runtime layout (hal/wire/session.py ZENOH_RUNTIME) saves that much robot-side CPU
     out["default_pools_to_hal_layout_cpu_ratio"] = (out["baseline_zenoh_default_pools_cpu_us_per_rt"]
                                                     / out["baseline_cpu_us_per_rt"])
     out = {k: round(v, 4) if isinstance(v, float) else v for k, v in out.items()}

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from servotau.apps.identify import DEFAULT_SIM_CONFIG, hal_for_collection
 from servotau.config import CONFIG_DIR
-from servotau.hal.factory import open_backend
+from servotau.hal.registry import open_backend
 from servotau.identification import MotorParameters
 from servotau.identification.pipeline import fit_log
 from servotau.identification.plan import load_plan

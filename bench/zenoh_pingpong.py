@@ -1,6 +1,6 @@
 """The floor under the HAL's round trip: a bare Zenoh Python ping-pong between two processes.
 
-Same session settings as the HAL (hal/zenoh_session.py: loopback, express publishers, REAL_TIME
+Same session settings as the HAL (hal/wire/session.py: loopback, express publishers, REAL_TIME
 priority, the HAL's GIL switch interval) and the same payload sizes (a 30-joint frame and
 command), but no decoding, firmware, robot or bookkeeping. The "robot" publishes a ping and sends
 the next one from the callback that receives the pong (as the HAL server ticks in its command
@@ -29,7 +29,7 @@ import time
 import numpy as np
 import zenoh
 
-from servotau.hal.zenoh_session import Session, callback, zenoh_config
+from servotau.hal.wire.session import Session, callback, zenoh_config
 
 FRAME_BYTES, COMMAND_BYTES, WARMUP = 518, 272, 200
 PATTERNS = ("channel", "threads")

@@ -112,8 +112,8 @@ def run_session(backend, *, mode: str, duration: float, stream: RerunStream | No
 
 
 def main(args) -> int:
-    from servotau.hal.factory import open_backend, overrides_from_args
     from servotau.hal.log import LogWriter
+    from servotau.hal.registry import open_backend, overrides_from_args
 
     backend = open_backend(args.hal, **overrides_from_args(args))
     rec = open_recording(args.rerun)

@@ -22,8 +22,8 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from servotau.description import ROOT_JOINT, load_pinocchio
 from servotau.errors import ControlError
-from servotau.simrobot.model import ROOT_JOINT, load_pinocchio
 
 from .config import BASES
 
@@ -46,13 +46,15 @@ def _as_index(idx: np.ndarray) -> slice | np.ndarray:
 class RobotDynamics:
     """``M(q) a + h(q, v)`` on the actuated joints, frame Jacobians and wrench transforms."""
 
-    def __init__(self, model_path: str | Path, joint_names: Sequence[str], base: str = "fixed"):
+    def __init__(self, model_path: str | Path, joint_names: Sequence[str], base: str = "fixed",
+                 root_joint: str = ROOT_JOINT):
+        """``root_joint``: the model's free flyer (:attr:`RobotInfo.root_joint`)."""
         if base not in BASES:
             raise ControlError(f"base = {base!r}: expected one of {list(BASES)}")
-        full = load_pinocchio(model_path)
+        full = load_pinocchio(model_path, root_joint)
         self.base = base
         if base == "fixed":
-            model = pin.buildReducedModel(full, [full.getJointId(ROOT_JOINT)], pin.neutral(full))
+            model = pin.buildReducedModel(full, [full.getJointId(root_joint)], pin.neutral(full))
         else:
             model = full
             self.gravity = np.array(full.gravity.linear)  # [m/s^2] world gravity, for fixed-base comparisons

@@ -206,7 +206,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     from servotau.control import ControlManager
     from servotau.control.trajectory import ForceCompatiblePosture, TrajectoryPoint, right_leg_swing
     from servotau.estimation import EstimatorConfig, TorqueEstimator, calibrate_ft_offsets
-    from servotau.hal.inprocess import InProcessBackend
+    from servotau.hal.backends.inprocess import InProcessBackend
     from servotau.simrobot.sim import SimConfig, SimRobot
 
     backend = InProcessBackend(SimRobot(SimConfig.named(scenario, seed=seed)))

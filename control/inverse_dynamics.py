@@ -18,13 +18,14 @@ Besides ``tau_d``, one call keeps the pieces that the paper's decomposition (eq.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from servotau.description import FT_FRAMES
 from servotau.errors import ControlError
-from servotau.hal.types import FT_SENSOR_NAMES
-from servotau.simrobot.model import FT_SITES
+from servotau.hal.types import RobotInfo
 
 from .config import ControlConfig, ForceTask
 from .dynamics import BaseState, RobotDynamics
@@ -47,7 +48,7 @@ class InverseDynamics:
     """Eq. 12 for all joints, with a fixed or floating base, contacts and an optional force task."""
 
     def __init__(self, dynamics: RobotDynamics, k_s: np.ndarray, k_d: np.ndarray, contacts: tuple[str, ...] = (),
-                 force: ForceTask | None = None):
+                 force: ForceTask | None = None, ft_frames: Mapping[str, str] = FT_FRAMES):
         """
         Args:
             dynamics: The robot model (its frames are extended here, so build it for this object).
@@ -55,6 +56,8 @@ class InverseDynamics:
             k_d: (n,) [N m s/rad] damping per joint.
             contacts: F/T sensors (HAL names) whose measured wrenches are compensated.
             force: Force task, or None.
+            ft_frames: HAL F/T sensor -> model frame of the sensor, in the row order of the HAL wrenches
+                (:attr:`RobotInfo.ft_sensor_names` and ``ft_sensor_frames``).
         """
         self.dyn = dynamics
         n = dynamics.n
@@ -65,10 +68,11 @@ class InverseDynamics:
             sensors.append(force.sensor)
         self._contacts: list[_Contact] = []
         self._task: _Contact | None = None
+        ft_names = list(ft_frames)
         for s in sensors:
-            if s not in FT_SENSOR_NAMES:
-                raise ControlError(f"contact {s!r}: expected an F/T sensor among {list(FT_SENSOR_NAMES)}")
-            sensor_frame = dynamics.frame_id(FT_SITES[s])
+            if s not in ft_frames:
+                raise ControlError(f"contact {s!r}: expected an F/T sensor among {ft_names}")
+            sensor_frame = dynamics.frame_id(ft_frames[s])
             frame, transform = sensor_frame, None
             if force is not None and s == force.sensor:
                 frame = dynamics.frame_id(force.frame)
@@ -76,7 +80,7 @@ class InverseDynamics:
                     frame = dynamics.add_offset_frame(TASK_FRAME, force.frame, force.offset)
                 if frame != sensor_frame:
                     transform = dynamics.wrench_transform(sensor_frame, frame)
-            c = _Contact(s, FT_SENSOR_NAMES.index(s), frame, transform, np.zeros((6, n)), np.zeros(6))
+            c = _Contact(s, ft_names.index(s), frame, transform, np.zeros((6, n)), np.zeros(6))
             self._contacts.append(c)
             if force is not None and s == force.sensor:
                 self._task = c
@@ -105,10 +109,15 @@ class InverseDynamics:
         self._tmp = np.zeros(n)
 
     @classmethod
-    def from_config(cls, config: ControlConfig, model_path: str) -> InverseDynamics:
-        """Build the model and the law for ``config`` (gains of position-controlled joints are 0)."""
-        dyn = RobotDynamics(model_path, config.joint_names, config.base)
-        return cls(dyn, config.joint_vector("k_s"), config.joint_vector("k_d"), config.contacts, config.force)
+    def from_config(cls, config: ControlConfig, model_path: str, info: RobotInfo | None = None) -> InverseDynamics:
+        """Build the model and the law for ``config`` (gains of position-controlled joints are 0); ``info``
+        gives the robot's root joint and F/T sensor frames (None: those of :mod:`servotau.description`)."""
+        if info is None:
+            dyn = RobotDynamics(model_path, config.joint_names, config.base)
+            return cls(dyn, config.joint_vector("k_s"), config.joint_vector("k_d"), config.contacts, config.force)
+        dyn = RobotDynamics(model_path, config.joint_names, config.base, info.root_joint)
+        frames = dict(zip(info.ft_sensor_names, info.ft_sensor_frames, strict=True))
+        return cls(dyn, config.joint_vector("k_s"), config.joint_vector("k_d"), config.contacts, config.force, frames)
 
     @property
     def contacts(self) -> tuple[str, ...]:

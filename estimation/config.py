@@ -110,10 +110,6 @@ class PredictionSettings:
         return bool(self.k_tau)
 
 
-def _default_ft_frames() -> dict[str, str]:
-    return {name: f"ft_{name}" for name in FT_SENSOR_NAMES}
-
-
 @dataclass(frozen=True, eq=False)
 class EstimatorConfig:
     """Everything that defines a :class:`~servotau.estimation.TorqueEstimator` (compared by identity:
@@ -126,7 +122,6 @@ class EstimatorConfig:
     align: bool = True  # delay the inputs of shorter windows so that all outputs share one time stamp
     angular_acceleration: str = "savgol"  # base angular acceleration: SG derivative of the gyro, or 0
     imu_frame: str = "imu"  # model frame of the IMU
-    ft_frames: Mapping[str, str] = field(default_factory=_default_ft_frames)  # HAL sensor -> model frame
     unknown_wrench_link: str = "CHEST_LINK1"  # body that takes the unknown external wrench (paper: torso)
     armature: bool = True  # rotor inertias (MJCF armature) in the RNEA, as in the simulated joint torque
     ft_offsets: np.ndarray = field(default_factory=lambda: np.zeros((len(FT_SENSOR_NAMES), 6)))  # [N, N m]
@@ -149,12 +144,6 @@ class EstimatorConfig:
             raise EstimationError("EstimatorConfig: angular_acceleration='savgol' needs imu.order >= 1")
         if self.encoders.order < 2:
             raise EstimationError(f"EstimatorConfig.encoders.order={self.encoders.order}: expected >= 2 (ddq)")
-        frames = dict(self.ft_frames)
-        if set(frames) != set(FT_SENSOR_NAMES):
-            raise EstimationError(
-                f"EstimatorConfig.ft_frames names {sorted(frames)}: expected {sorted(FT_SENSOR_NAMES)}"
-            )
-        object.__setattr__(self, "ft_frames", MappingProxyType(frames))
         for name, shape in (("ft_offsets", (len(FT_SENSOR_NAMES), 6)), ("gyro_bias", (3,))):
             arr = np.array(getattr(self, name), dtype=float)
             if arr.shape != shape or not np.all(np.isfinite(arr)):
@@ -208,7 +197,7 @@ class EstimatorConfig:
         half a window, as in the paper); ``"low_delay"`` applies its [low_delay] table."""
         root = load_toml(path)
         root.check_keys(["eval_at", "align", "angular_acceleration", "imu_frame", "unknown_wrench_link",
-                         "armature", "filters", "ft_frames", "calibration", "model", "prediction", "low_delay"])
+                         "armature", "filters", "calibration", "model", "prediction", "low_delay"])
         defaults = cls()
         filters = root.section("filters", {})
         filters.check_keys(["encoders", "imu", "ft"])
@@ -221,10 +210,6 @@ class EstimatorConfig:
             if window < order + 2:
                 raise sec.error("window", window, f"an integer >= order + 2 = {order + 2}")
             return FilterSettings(window, order)
-
-        frames_sec = root.section("ft_frames", {})
-        frames_sec.check_keys(FT_SENSOR_NAMES)
-        ft_frames = {s: frames_sec.str(s, defaults.ft_frames[s]) for s in FT_SENSOR_NAMES}
 
         cal = root.section("calibration", {})
         cal.check_keys(["gyro_bias", "ft_offsets"])
@@ -247,7 +232,6 @@ class EstimatorConfig:
             angular_acceleration=root.str("angular_acceleration", defaults.angular_acceleration,
                                           choices=ANGULAR_ACCELERATION),
             imu_frame=root.str("imu_frame", defaults.imu_frame),
-            ft_frames=ft_frames,
             unknown_wrench_link=root.str("unknown_wrench_link", defaults.unknown_wrench_link),
             armature=root.bool("armature", defaults.armature),
             ft_offsets=offsets,

@@ -1,8 +1,9 @@
 """The estimator's rigid-body model: Pinocchio model, joints addressed by name, sensor geometry.
 
-Built from :attr:`RobotInfo.model_path` (the MJCF file) with ``pinocchio.buildModelFromMJCF`` only:
-nothing from the simulator. The model's gravity is set to zero: the estimator feeds the measured
-proper acceleration of the base (``a_b - g``, from the IMU) as the base acceleration instead.
+Built from :attr:`RobotInfo.model_path` (the MJCF file) by :func:`servotau.description.load_pinocchio`,
+the F/T sensors at :attr:`RobotInfo.ft_sensor_frames`: nothing from the simulator. The model's gravity
+is set to zero: the estimator feeds the measured proper acceleration of the base (``a_b - g``, from the
+IMU) as the base acceleration instead.
 
 Conventions:
 - Pinocchio's base is the waist ``BODY`` (the free flyer ``root``); the estimator always places it
@@ -23,12 +24,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from servotau.description import load_pinocchio
 from servotau.errors import EstimationError
 from servotau.hal.types import RobotInfo
 
 from .config import EstimatorConfig, ModelPerturbation
-
-ROOT_JOINT = "root"
 
 
 @dataclass(frozen=True)
@@ -77,17 +77,6 @@ class FtSensorGeometry:
     joint_M_sensor: pin.SE3  # sensor placement in the locked joint's frame
     welded_inertia: pin.Inertia  # the welded bodies beyond the sensor, locked joint frame
     distal_joints: tuple[int, ...]  # actuated joints beyond the sensor (the gripper), with their subtrees
-
-
-def load_model(path: str) -> pin.Model:
-    """Pinocchio model of the MJCF file ``path`` with its free-flyer root (gravity left as parsed)."""
-    try:
-        model = pin.buildModelFromMJCF(str(path))
-    except (RuntimeError, ValueError) as err:
-        raise EstimationError(f"{path}: Pinocchio cannot parse the robot model: {err}") from err
-    if model.njoints < 2 or model.names[1] != ROOT_JOINT or model.joints[1].shortname() != "JointModelFreeFlyer":
-        raise EstimationError(f'{path}: expected joint 1 to be the free flyer "{ROOT_JOINT}", got {list(model.names)}')
-    return model
 
 
 def _welded_frames(model: pin.Model, joint: int) -> list[int]:
@@ -255,8 +244,9 @@ class EstimatorModel:
     """
 
     def __init__(self, info: RobotInfo, config: EstimatorConfig):
-        frames = {s: config.ft_frames[s] for s in info.ft_sensor_names}
-        model, locked = split_sensor_bodies(perturb_inertias(load_model(info.model_path), config.perturbation), frames)
+        frames = {s: info.ft_frame(s) for s in info.ft_sensor_names}
+        full = load_pinocchio(info.model_path, info.root_joint)
+        model, locked = split_sensor_bodies(perturb_inertias(full, config.perturbation), frames)
         model.gravity = pin.Motion.Zero()
         if not config.armature:
             model.armature[:] = 0.0

@@ -1,7 +1,7 @@
-"""``python -m servotau.hal --robot module:callable ...``: serve a robot (see servotau.hal.server)."""
+"""``python -m servotau.hal --robot module:callable ...``: serve a robot (see servotau.hal.robot.server)."""
 
 import sys
 
-from .server import main
+from .robot.server import main
 
 sys.exit(main())

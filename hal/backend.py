@@ -1,7 +1,7 @@
 """Controller-side interface to a robot: one base class, three backends (zenoh, inprocess, replay).
 
 A controller only sees :class:`Backend`; switching from the simulator to a replay or the real
-robot is one line of config (:func:`servotau.hal.factory.open_backend`).
+robot is one line of config (:func:`servotau.hal.registry.open_backend`).
 """
 
 from __future__ import annotations
@@ -9,15 +9,11 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import HalError
-from .types import RobotInfo, SensorFrame
-
-if TYPE_CHECKING:
-    from servotau.simrobot.truth import GroundTruth
+from .types import GroundTruth, RobotInfo, SensorFrame
 
 
 class JointCommand:

@@ -32,13 +32,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import HalError
-from .protocol import info_from_json, info_to_json, truth_layout
-from .types import STATUS_NAMES, RobotInfo, SensorFrame
+from .types import STATUS_NAMES, GroundTruth, RobotInfo, SensorFrame
+from .wire.protocol import info_from_json, info_to_json, truth_layout
 
 if TYPE_CHECKING:
     import pyarrow as pa
-
-    from servotau.simrobot.truth import GroundTruth
 
 logger = logging.getLogger(__name__)
 
@@ -412,11 +410,9 @@ class LogReader:
         """Ground truth of row ``row``, or None if the log has no (complete) truth columns."""
         if not self.has_truth:
             return None
-        from .protocol import _truth_cls
-
         vec = np.array([self.columns[c][row] for c in truth_columns(self.info)])
-        return _truth_cls().from_vector(float(self.columns["t"][row]), int(self.columns["seq"][row]), vec,
-                                        self.info.nq)
+        return GroundTruth.from_vector(float(self.columns["t"][row]), int(self.columns["seq"][row]), vec,
+                                       self.info.nq)
 
     def frames(self) -> Iterator[SensorFrame]:
         """The recorded frames, in order, equal to the recorded arrays."""

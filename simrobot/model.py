@@ -1,4 +1,7 @@
-"""The HRP-2-like robot model: one MJCF file for MuJoCo (simulator) and Pinocchio (estimator, controller).
+"""The robot model in the simulator: MuJoCo loading, and the MuJoCo <-> Pinocchio state conversions.
+
+The model file, the names of joints and sensors and the Pinocchio loader live in
+:mod:`servotau.description` (the estimator and the controller read them from there, without MuJoCo).
 
 State conventions of the two libraries for the free-floating base (the ``root`` joint):
 
@@ -14,12 +17,11 @@ by name, never by index.
 F/T sensors: MuJoCo's ``<force>``/``<torque>`` sensors on a site return the wrench that the parent body
 (proximal side) exerts on the site's body (distal side), in the site frame at the site origin. The HAL
 convention (hal/types.py) is the opposite, distal on proximal, so :func:`mujoco_wrench_to_hal` flips the
-sign (checked by tests/test_model.py with a hanging foot and a standing robot).
+sign (checked by tests/test_simrobot_model.py with a hanging foot and a standing robot).
 """
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -29,36 +31,9 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from servotau.description import HALF_SITTING, JOINT_NAMES, MODEL_PATH, ROOT_JOINT, load_pinocchio
+from servotau.description.pinocchio_model import existing_model_file
 from servotau.errors import ConfigError, ServotauError
-
-MODEL_PATH: Path = Path(__file__).resolve().parent / "models" / "hrp2.xml"
-"""The robot's MJCF file."""
-
-ROOT_JOINT = "root"
-"""Name of the free joint of the waist body ``BODY``."""
-
-HALF_SITTING = "half_sitting"
-"""Name of the half-sitting keyframe."""
-
-JOINT_NAMES: tuple[str, ...] = (
-    *(f"RLEG_JOINT{i}" for i in range(6)),
-    *(f"LLEG_JOINT{i}" for i in range(6)),
-    "CHEST_JOINT0",
-    "CHEST_JOINT1",
-    "HEAD_JOINT0",
-    "HEAD_JOINT1",
-    *(f"RARM_JOINT{i}" for i in range(7)),
-    *(f"LARM_JOINT{i}" for i in range(7)),
-)
-"""The 30 actuated joints in the HRP-2 order (the HAL joint order)."""
-
-FT_SITES: dict[str, str] = {
-    "right_ankle": "ft_right_ankle",
-    "left_ankle": "ft_left_ankle",
-    "right_wrist": "ft_right_wrist",
-    "left_wrist": "ft_left_wrist",
-}
-"""HAL F/T sensor name -> MJCF site; sensors ``<site>_force`` and ``<site>_torque`` are defined on it."""
 
 MUJOCO_TO_HAL_WRENCH_SIGN = -1.0
 """MuJoCo's force/torque sensors give proximal-on-distal; the HAL wants distal-on-proximal."""
@@ -83,29 +58,11 @@ def mujoco_wrench_to_hal(wrench: np.ndarray) -> np.ndarray:
 
 def load_mujoco(path: str | Path = MODEL_PATH) -> mujoco.MjModel:
     """Compile the MJCF file ``path`` with MuJoCo."""
-    path = _existing(path)
+    path = existing_model_file(path)
     try:
         return mujoco.MjModel.from_xml_path(str(path))
     except ValueError as err:
         raise ConfigError(f"{path}: MuJoCo cannot compile the model: {err}") from err
-
-
-def load_pinocchio(path: str | Path = MODEL_PATH) -> pin.Model:
-    """Build the Pinocchio model of the MJCF file ``path``, with the free-flyer root joint.
-
-    The parser turns ``<freejoint name="root"/>`` into a ``JointModelFreeFlyer`` by itself (passing a
-    root joint would not add a second one), reads ``armature`` and turns sites into frames. It ignores
-    ``<option gravity>``, so gravity is copied from the file here.
-    """
-    path = _existing(path)
-    try:
-        model = pin.buildModelFromMJCF(str(path))
-    except (RuntimeError, ValueError) as err:
-        raise ConfigError(f"{path}: Pinocchio cannot parse the model: {err}") from err
-    if model.njoints < 2 or model.names[1] != ROOT_JOINT or model.joints[1].shortname() != "JointModelFreeFlyer":
-        raise ConfigError(f'{path}: expected joint 1 to be the free flyer "{ROOT_JOINT}", got {list(model.names)}')
-    model.gravity.linear = _gravity(path)
-    return model
 
 
 @dataclass(frozen=True)
@@ -284,20 +241,6 @@ def keyframe_qpos(mj_model: mujoco.MjModel, name: str) -> np.ndarray:
 def half_sitting_qpos(mj_model: mujoco.MjModel | None = None) -> np.ndarray:
     """MuJoCo ``qpos`` (37,) of the ``half_sitting`` keyframe [m, quaternion wxyz, rad]."""
     return keyframe_qpos(mj_model if mj_model is not None else load_mujoco(), HALF_SITTING)
-
-
-def _existing(path: str | Path) -> Path:
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"robot model file {path} does not exist: expected an MJCF file")
-    return path
-
-
-def _gravity(path: Path) -> np.ndarray:
-    """[m/s^2] (3,) ``<option gravity>`` of the MJCF file (MuJoCo's default if absent)."""
-    option = ET.parse(path).getroot().find("option")
-    text = option.get("gravity") if option is not None else None
-    return np.array([float(x) for x in text.split()]) if text else np.array([0.0, 0.0, -9.81])
 
 
 def _vec(x: np.ndarray, n: int, name: str) -> np.ndarray:

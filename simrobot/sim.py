@@ -21,15 +21,15 @@ import mujoco
 import numpy as np
 
 from servotau.config import CONFIG_DIR, load_toml, resolve_config_path
+from servotau.description import FT_FRAMES, FT_SENSOR_NAMES, JOINT_NAMES, MODEL_PATH, ROOT_JOINT
 from servotau.errors import ConfigError
-from servotau.hal.types import FT_SENSOR_NAMES, RobotInfo, SensorFrame
+from servotau.hal.types import GroundTruth, RobotInfo, SensorFrame
 
 from . import model as robot_model
 from .scenario import OperatorPush, Scenario, bend_right_leg_for_block, build_model
 from .sensors import SensorConfig, SensorModel
 from .servo import Servo
 from .servo_config import load_servo_params
-from .truth import GroundTruth
 
 FLEX_SUBSTEPS = 4  # sub-steps per tick when a joint has an elastic gear or backlash
 
@@ -41,7 +41,7 @@ class SimConfig:
     scenario: Scenario
     servo_path: Path = CONFIG_DIR / "servo.toml"
     sensors: SensorConfig = field(default_factory=lambda: SensorConfig.from_toml(CONFIG_DIR / "sensors.toml"))
-    model_path: Path = robot_model.MODEL_PATH
+    model_path: Path = MODEL_PATH
     seed: int = 0
     effects: dict | None = None  # overrides servo.toml's [effects] table
 
@@ -72,7 +72,7 @@ class SimRobot:
         self.config = config
         sc = config.scenario
         base = mujoco.MjModel.from_xml_path(str(config.model_path))
-        self.joint_names = robot_model.JOINT_NAMES
+        self.joint_names = JOINT_NAMES
         qpos0 = robot_model.keyframe_qpos(base, sc.initial_posture)
         qpos0[2] = sc.base_height
         self._qadr = np.array([base.joint(j).qposadr[0] for j in self.joint_names])
@@ -105,10 +105,11 @@ class SimRobot:
         lo, hi = m.jnt_range[[m.joint(j).id for j in self.joint_names]].T
         self.info = RobotInfo(
             name="hrp2-sim", joint_names=self.joint_names, q_min=lo, q_max=hi, period=self.period,
-            model_path=str(config.model_path),
+            model_path=str(config.model_path), ft_sensor_names=FT_SENSOR_NAMES,
+            ft_sensor_frames=tuple(FT_FRAMES[s] for s in FT_SENSOR_NAMES), root_joint=ROOT_JOINT,
         )
         self._ft_adr = [
-            (m.sensor(f"ft_{s}_force").adr[0], m.sensor(f"ft_{s}_torque").adr[0]) for s in FT_SENSOR_NAMES
+            (m.sensor(f"{site}_force").adr[0], m.sensor(f"{site}_torque").adr[0]) for site in self.info.ft_sensor_frames
         ]
         self._gyro_adr = m.sensor("imu_gyro").adr[0]
         self._acc_adr = m.sensor("imu_accel").adr[0]

@@ -1,7 +1,7 @@
 """Tests of the controller a user starts: servotau control (in process)."""
 
 from servotau.control.app import run_session
-from servotau.hal.factory import open_backend
+from servotau.hal.registry import open_backend
 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]
 

@@ -183,7 +183,7 @@ def test_cli_error_in_a_subprocess_exits_2_with_the_file_named(tmp_path):
 
 def test_collect_runs_over_zenoh_against_the_simulated_robot_process(tmp_path):
     """collect on the zenoh backend (a `servotau sim` process) records every tick, the commands and the truth."""
-    from hal_support import ENV, free_port, stop_process
+    from support.hal import ENV, free_port, stop_process
 
     plan_path = tmp_path / "tiny.toml"
     plan_path.write_text('[collect]\njoints = ["RLEG_JOINT3"]\nsettle = 0.5\n[collect.sweep]\nduration = 1.5\n'

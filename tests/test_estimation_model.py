@@ -4,17 +4,16 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from servotau.description import FT_FRAMES, JOINT_NAMES, MODEL_PATH, load_pinocchio
 from servotau.errors import EstimationError
 from servotau.estimation.config import EstimatorConfig, ModelPerturbation
 from servotau.estimation.model import (
     EstimatorModel,
     JointAddress,
-    load_model,
     perturb_inertias,
     split_sensor_bodies,
 )
 from servotau.hal.types import RobotInfo
-from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
 
 
 def info_with(names) -> RobotInfo:
@@ -25,7 +24,7 @@ def info_with(names) -> RobotInfo:
 
 def test_joints_are_addressed_by_name_in_any_order():
     """A shuffled HAL order maps each name to its own Pinocchio q and v index."""
-    model = load_model(str(MODEL_PATH))
+    model = load_pinocchio(MODEL_PATH)
     names = list(JOINT_NAMES)
     np.random.default_rng(0).shuffle(names)
     address = JointAddress.by_name(model, tuple(names))
@@ -36,7 +35,7 @@ def test_joints_are_addressed_by_name_in_any_order():
 
 def test_unknown_or_missing_joint_names_raise():
     """A name absent from the model, or a model joint absent from the names, raises EstimationError."""
-    model = load_model(str(MODEL_PATH))
+    model = load_pinocchio(MODEL_PATH)
     with pytest.raises(EstimationError, match="RLEG_JOINT9"):
         JointAddress.by_name(model, (*JOINT_NAMES[:-1], "RLEG_JOINT9"))
     with pytest.raises(EstimationError, match="LARM_JOINT6"):
@@ -62,8 +61,8 @@ def test_bodies_beyond_the_sensors_are_the_foot_and_the_hand_with_its_gripper():
 
 def test_split_model_has_the_same_dynamics():
     """Splitting the bodies beyond the sensors onto locked joints changes no torque, frame or mass."""
-    original = load_model(str(MODEL_PATH))
-    frames = {s: f"ft_{s}" for s in ("right_ankle", "left_ankle", "right_wrist", "left_wrist")}
+    original = load_pinocchio(MODEL_PATH)
+    frames = dict(FT_FRAMES)
     split, locked = split_sensor_bodies(original, frames)
     assert split.nv == original.nv + 4 and len(locked) == 4
     rng = np.random.default_rng(5)
@@ -103,7 +102,7 @@ def test_dependencies_follow_the_kinematic_tree():
 
 def test_perturbation_is_seeded_and_keeps_welded_frames_consistent():
     """Masses change by the seeded draw; joint inertia = own + welded frames; std 0 changes nothing."""
-    model = load_model(str(MODEL_PATH))
+    model = load_pinocchio(MODEL_PATH)
     same = perturb_inertias(model, ModelPerturbation())
     assert all(same.inertias[j] == model.inertias[j] for j in range(model.njoints))
     a = perturb_inertias(model, ModelPerturbation(0.1, 0.01, seed=3))

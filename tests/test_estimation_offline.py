@@ -94,7 +94,7 @@ def test_offline_rejects_non_uniform_time(swing):
 def test_estimates_replayed_from_a_parquet_log_are_bit_identical(swing, tmp_path):
     """Frames written to the project's Parquet log and played by ReplayBackend give the on-line estimates."""
     log = pytest.importorskip("servotau.hal.log")
-    replay_backend = pytest.importorskip("servotau.hal.replay")
+    replay_backend = pytest.importorskip("servotau.hal.backends.replay")
     robot, config, frames, truths, online = swing
     path = tmp_path / "swing.parquet"
     with log.LogWriter(path, robot.info, truth=False, extra=[], background=False) as writer:

@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from fake_robot import FakeRobot
-from hal_support import endpoint, free_port, robot_server
+from support.hal import endpoint, free_port, robot_server
 
 from servotau.errors import HalError
 from servotau.hal import Backend, InProcessBackend, LogWriter, ReplayBackend, ZenohBackend
+from servotau.simrobot.fake import FakeRobot
 
 LIVE = ("zenoh", "inprocess")
 

@@ -7,12 +7,12 @@ import sys
 
 import numpy as np
 import pytest
-from fake_robot import FakeRobot
-from hal_support import ENV
+from support.hal import ENV
 
 from servotau.errors import HalError
 from servotau.hal import LogReader, LogWriter, frames, read_log
 from servotau.hal.log import parts_dir
+from servotau.simrobot.fake import FakeRobot
 
 
 def _record(path, n=250, **kw):
@@ -79,7 +79,7 @@ def test_crash_loses_at_most_the_last_chunk(tmp_path):
     path = tmp_path / "crash.parquet"
     code = f"""
 import os
-from fake_robot import FakeRobot
+from servotau.simrobot.fake import FakeRobot
 from servotau.hal import LogWriter
 robot = FakeRobot()
 w = LogWriter({str(path)!r}, robot.info, chunk_rows=100, background=False)

@@ -11,13 +11,13 @@ import time
 import numpy as np
 import pytest
 import zenoh
-from fake_robot import FakeRobot
-from hal_controller import run
-from hal_support import controller, endpoint, free_port, robot_server, stop_process
+from support.controller import run
+from support.hal import controller, endpoint, free_port, robot_server, stop_process
 
 from servotau.hal import FirmwareState, InProcessBackend, LogReader, ZenohBackend, keys
-from servotau.hal.protocol import HEADER, HEADER_SIZE, encode_command
-from servotau.hal.zenoh_session import Session, zenoh_config
+from servotau.hal.wire.protocol import HEADER, HEADER_SIZE, encode_command
+from servotau.hal.wire.session import Session, zenoh_config
+from servotau.simrobot.fake import FakeRobot
 
 TICKS = 10_000  # 10 s of robot time at 1 kHz
 

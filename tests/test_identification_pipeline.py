@@ -12,8 +12,8 @@ from servotau.apps.identify import hal_for_collection
 from servotau.apps.operator_script import check_timing, write_sim_setup
 from servotau.config import CONFIG_DIR
 from servotau.errors import ConfigError, IdentificationError
-from servotau.hal.factory import open_backend
 from servotau.hal.log import LogReader
+from servotau.hal.registry import open_backend
 from servotau.identification.collect import HoldPlan, SweepPlan
 from servotau.identification.pipeline import fit_log, load_aligned
 from servotau.identification.plan import PHASES, CollectionPlan, FitSettings, load_plan

@@ -122,7 +122,7 @@ def collected_log(tmp_path_factory):
     """A 7 s simulated identification collection of the knee (sensors and ground truth, no estimate)."""
     from servotau.apps.identify import hal_for_collection
     from servotau.apps.operator_script import write_sim_setup
-    from servotau.hal.factory import open_backend
+    from servotau.hal.registry import open_backend
     from servotau.identification.collect import HoldPlan, SweepPlan
     from servotau.identification.plan import CollectionPlan, load_plan
     from servotau.identification.session import run_collection

@@ -63,7 +63,7 @@ def register(sub) -> None:
 def hal_for_collection(hal: str, backend: str | None, sim_config: str) -> tuple[Section, str]:
     """The ``[hal]`` section of ``hal`` with the inprocess robot built from ``sim_config`` (the HAL's
     inprocess factory takes a sim config path as its ``scenario``), and the backend name."""
-    from servotau.hal.factory import hal_section
+    from servotau.hal.registry import hal_section
 
     s = hal_section(hal)
     name = backend or s.str("backend", choices=("zenoh", "inprocess", "replay"))
@@ -81,7 +81,7 @@ def hal_for_collection(hal: str, backend: str | None, sim_config: str) -> tuple[
 
 
 def collect_main(args) -> int:
-    from servotau.hal.factory import open_backend
+    from servotau.hal.registry import open_backend
     from servotau.identification.plan import check_joints, load_plan, parse_joints
     from servotau.identification.session import run_collection
 

@@ -26,8 +26,8 @@ def register(sub) -> None:
 
 
 def main(args) -> int:
-    from servotau.hal.factory import server_config
-    from servotau.hal.server import serve
+    from servotau.hal.robot.config import server_config
+    from servotau.hal.robot.server import serve
     from servotau.simrobot.sim import SimConfig, SimRobot
 
     sim_config = SimConfig.from_toml(args.config)

@@ -1,4 +1,4 @@
-"""Tests of the robot model file and of the MuJoCo <-> Pinocchio helpers (servotau.simrobot.model)."""
+"""The robot model file (servotau.description) in MuJoCo and Pinocchio, and the MuJoCo <-> Pinocchio helpers."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from servotau import description
 from servotau.errors import ConfigError, ServotauError
 from servotau.simrobot import model as hrp2
 
@@ -38,15 +39,15 @@ def mj_model():
 
 @pytest.fixture(scope="module")
 def pin_model():
-    return hrp2.load_pinocchio()
+    return description.load_pinocchio()
 
 
 def _locked_robot(weld_base: bool, base_height: float):
     """Robot in half-sitting with every joint held by an equality constraint, settled for 0.5 s."""
-    spec = mujoco.MjSpec.from_file(str(hrp2.MODEL_PATH))
+    spec = mujoco.MjSpec.from_file(str(description.MODEL_PATH))
     m0 = hrp2.load_mujoco()
     q_hs = hrp2.half_sitting_qpos(m0)
-    for name in hrp2.JOINT_NAMES:
+    for name in description.JOINT_NAMES:
         eq = spec.add_equality()
         eq.type, eq.objtype, eq.name1 = mujoco.mjtEq.mjEQ_JOINT, mujoco.mjtObj.mjOBJ_JOINT, name
         eq.solref = [0.005, 1.0]  # [s] stiff, critically damped: settles within 0.5 s
@@ -72,7 +73,7 @@ def _locked_robot(weld_base: bool, base_height: float):
 
 
 def _hal_wrench(m, d, sensor: str) -> np.ndarray:
-    site = hrp2.FT_SITES[sensor]
+    site = description.FT_FRAMES[sensor]
     return hrp2.mujoco_wrench_to_hal(np.concatenate([d.sensor(f"{site}_force").data, d.sensor(f"{site}_torque").data]))
 
 
@@ -81,7 +82,7 @@ def _random_state(m, rng):
     qpos[0:3] = rng.uniform(-1.0, 1.0, 3) + [0.0, 0.0, 3.0]  # high enough: no contact
     quat = rng.normal(size=4)
     qpos[3:7] = quat / np.linalg.norm(quat)
-    for name in hrp2.JOINT_NAMES:
+    for name in description.JOINT_NAMES:
         lo, hi = m.joint(name).range
         qpos[m.joint(name).qposadr[0]] = rng.uniform(lo + 1e-3, hi - 1e-3)
     return qpos, rng.normal(size=m.nv), rng.normal(size=m.nv)
@@ -90,18 +91,18 @@ def _random_state(m, rng):
 def test_loads_in_both_libraries(mj_model, pin_model):
     """MuJoCo and Pinocchio load the file with a free-flyer root and the same 30 joint names."""
     assert (mj_model.nq, mj_model.nv) == (pin_model.nq, pin_model.nv) == (37, 36)
-    assert list(pin_model.names)[1:] == [hrp2.ROOT_JOINT, *hrp2.JOINT_NAMES]
+    assert list(pin_model.names)[1:] == [description.ROOT_JOINT, *description.JOINT_NAMES]
     assert pin_model.joints[1].shortname() == "JointModelFreeFlyer"
-    assert mj_model.jnt_type[mj_model.joint(hrp2.ROOT_JOINT).id] == mujoco.mjtJoint.mjJNT_FREE
-    assert mj_model.body(mj_model.joint(hrp2.ROOT_JOINT).bodyid[0]).name == "BODY"
+    assert mj_model.jnt_type[mj_model.joint(description.ROOT_JOINT).id] == mujoco.mjtJoint.mjJNT_FREE
+    assert mj_model.body(mj_model.joint(description.ROOT_JOINT).bodyid[0]).name == "BODY"
     jm = hrp2.JointMap.from_models(mj_model, pin_model)
-    assert [mj_model.joint(n).qposadr[0] for n in hrp2.JOINT_NAMES] == list(jm.mj_qpos)
+    assert [mj_model.joint(n).qposadr[0] for n in description.JOINT_NAMES] == list(jm.mj_qpos)
 
 
 def test_joint_limits_match_public_table(mj_model, pin_model):
     """Every joint is a limited hinge with the public limits, in MuJoCo and in Pinocchio."""
     jm = hrp2.default_joint_map()
-    for name, (lo, hi), iq in zip(hrp2.JOINT_NAMES, LIMITS, jm.pin_q, strict=True):
+    for name, (lo, hi), iq in zip(description.JOINT_NAMES, LIMITS, jm.pin_q, strict=True):
         j = mj_model.joint(name)
         assert j.type[0] == mujoco.mjtJoint.mjJNT_HINGE and mj_model.jnt_limited[j.id]
         np.testing.assert_allclose(j.range, [lo, hi], atol=1e-12, err_msg=name)
@@ -157,7 +158,7 @@ def test_state_conversion_round_trip_and_kinematics(mj_model, pin_model):
     d.qpos[:], d.qvel[:] = qpos, qvel
     mujoco.mj_forward(mj_model, d)
     pin.framesForwardKinematics(pin_model, pdata, q)
-    for site in [*hrp2.FT_SITES.values(), "imu"]:
+    for site in [*description.FT_FRAMES.values(), "imu"]:
         oMf = pdata.oMf[pin_model.getFrameId(site)]
         np.testing.assert_allclose(oMf.translation, d.site(site).xpos, atol=1e-12)
         np.testing.assert_allclose(oMf.rotation, d.site(site).xmat.reshape(3, 3), atol=1e-12)
@@ -180,7 +181,7 @@ def test_half_sitting_soles_on_floor_and_com(mj_model, pin_model):
     com = d.subtree_com[mj_model.body("BODY").id]
     print(f"half-sitting CoM: {com} [m]")
     assert 0.7 < com[2] < 0.9
-    q_ref = pin_model.referenceConfigurations[hrp2.HALF_SITTING]  # Pinocchio reads the keyframe too
+    q_ref = pin_model.referenceConfigurations[description.HALF_SITTING]  # Pinocchio reads the keyframe too
     np.testing.assert_allclose(q_ref, hrp2.mujoco_to_pinocchio_state(d.qpos, d.qvel).q, atol=1e-12)
     assert pin.centerOfMass(pin_model, pin_model.createData(), q_ref)[2] == pytest.approx(com[2], abs=1e-12)
 
@@ -214,14 +215,14 @@ def test_ft_sign_hanging_foot():
     assert d.ncon == 0
     for sensor, body in (("right_ankle", "RLEG_FOOT"), ("left_ankle", "LLEG_FOOT")):
         mass, com = m.body(body).mass[0], m.body(body).ipos  # CoM in the foot (= sensor) frame
-        rot = d.site(hrp2.FT_SITES[sensor]).xmat.reshape(3, 3)  # about level in half-sitting
+        rot = d.site(description.FT_FRAMES[sensor]).xmat.reshape(3, 3)  # about level in half-sitting
         weight = rot.T @ [0.0, 0.0, -mass * G]  # in the sensor frame
         expected = np.concatenate([weight, np.cross(com, weight)])
         np.testing.assert_allclose(_hal_wrench(m, d, sensor), expected, atol=1e-2)
         assert _hal_wrench(m, d, sensor)[2] < -0.99 * mass * G
     for sensor, body in (("right_wrist", "RARM_HAND"), ("left_wrist", "LARM_HAND")):
         mass = m.body(body).subtreemass[0]  # hand and gripper
-        rot = d.site(hrp2.FT_SITES[sensor]).xmat.reshape(3, 3)
+        rot = d.site(description.FT_FRAMES[sensor]).xmat.reshape(3, 3)
         np.testing.assert_allclose(rot @ _hal_wrench(m, d, sensor)[:3], [0.0, 0.0, -mass * G], atol=1e-2)
 
 
@@ -283,6 +284,6 @@ def test_unknown_keyframe_raises_config_error(mj_model):
 
 def test_missing_file_raises_config_error(tmp_path):
     """Loading a file that does not exist raises ConfigError naming the file."""
-    for load in (hrp2.load_mujoco, hrp2.load_pinocchio):
+    for load in (hrp2.load_mujoco, description.load_pinocchio):
         with pytest.raises(ConfigError, match="nope.xml"):
             load(tmp_path / "nope.xml")

@@ -12,9 +12,11 @@ from typing import Any
 
 import zenoh
 
-from .errors import HalError
+from ..errors import HalError
+from .protocol import DEFAULT_ENDPOINT
 
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+__all__ = ["DEFAULT_ENDPOINT", "GIL_SWITCH_INTERVAL", "ZENOH_RUNTIME", "Session", "callback", "zenoh_config"]
+
 # [s] CPython's GIL switch interval while a session is open (CPython's default: 5 ms). A message
 # reaches Python in zenoh's callback thread, which must take the GIL from the thread holding it;
 # with 5 ms the lock-step round trip p99 was 1.3-1.5 ms on loopback, with 0.2 ms 0.3 ms.

@@ -7,13 +7,13 @@ import time
 
 import numpy as np
 import pytest
-from fake_robot import FakeRobot
-from hal_support import endpoint, free_port, robot_server
+from support.hal import endpoint, free_port, robot_server
 
 from servotau.errors import HalError, HalTimeoutError
 from servotau.hal import MalformedMessage, ZenohBackend, keys
-from servotau.hal.protocol import HEADER_SIZE, encode_frame, info_to_json
-from servotau.hal.zenoh_session import Session, zenoh_config
+from servotau.hal.wire.protocol import HEADER_SIZE, encode_frame, info_to_json
+from servotau.hal.wire.session import Session, zenoh_config
+from servotau.simrobot.fake import FakeRobot
 
 
 def test_read_times_out_when_no_new_frame_comes(tmp_path):

@@ -1,4 +1,8 @@
-"""A tiny served robot for the HAL tests: 30 joints, first-order position servos, seeded noise."""
+"""A tiny simulated robot without physics: 30 joints, first-order position servos, seeded noise.
+
+It serves the HAL's tests and benchmarks (``python -m servotau.hal --robot servotau.simrobot.fake:FakeRobot``)
+where the HRP-2 simulation would only cost time; it loads neither MuJoCo nor Pinocchio.
+"""
 
 from __future__ import annotations
 
@@ -6,12 +10,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from servotau.hal import RobotInfo, SensorFrame
-from servotau.simrobot.truth import GroundTruth
+from servotau.hal.types import GroundTruth, RobotInfo, SensorFrame
 
 
 class FakeRobot:
-    """Implements :class:`servotau.hal.ServedRobot` without physics (deterministic for a given seed)."""
+    """Implements :class:`servotau.hal.robot.served.ServedRobot` without physics (deterministic for a given seed)."""
 
     def __init__(self, scenario: str | None = None, *, seed: int = 0, n_joints: int = 30, period: float = 1e-3,
                  time_constant: float = 0.02, noise: float = 1e-4, name: str = "fake"):

@@ -7,11 +7,11 @@ import timeit
 
 import numpy as np
 import pytest
-from fake_robot import FakeRobot
 
 from servotau.errors import HalError
 from servotau.hal import MalformedMessage, ProtocolVersionMismatch, keys
-from servotau.hal.protocol import (
+from servotau.hal.types import STATUS_INVALID, SensorFrame
+from servotau.hal.wire.protocol import (
     FLAG_HOLDING,
     HEADER,
     HEADER_SIZE,
@@ -27,7 +27,7 @@ from servotau.hal.protocol import (
     info_from_json,
     info_to_json,
 )
-from servotau.hal.types import STATUS_INVALID, SensorFrame
+from servotau.simrobot.fake import FakeRobot
 
 ROBOT = FakeRobot(seed=3)
 NAMES = ROBOT.info.joint_names

@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from .types import RobotInfo, SensorFrame
-
-if TYPE_CHECKING:
-    from servotau.simrobot.truth import GroundTruth
+from ..types import GroundTruth, RobotInfo, SensorFrame
 
 
 @runtime_checkable
 class ServedRobot(Protocol):
-    """A robot driven one period at a time by :class:`~servotau.hal.server.RobotServer` or
-    :class:`~servotau.hal.inprocess.InProcessBackend`, behind the robot-side firmware."""
+    """A robot driven one period at a time by :class:`~servotau.hal.robot.server.RobotServer` or
+    :class:`~servotau.hal.backends.inprocess.InProcessBackend`, behind the robot-side firmware."""
 
     info: RobotInfo
 

@@ -29,17 +29,15 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
-from .errors import HalError, MalformedMessage, ProtocolVersionMismatch
-from .types import STATUS_SATURATED, RobotInfo, SensorFrame
-
-if TYPE_CHECKING:
-    from servotau.simrobot.truth import GroundTruth
+from ..errors import HalError, MalformedMessage, ProtocolVersionMismatch
+from ..types import STATUS_SATURATED, GroundTruth, RobotInfo, SensorFrame
 
 PROTOCOL_VERSION = 1
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"  # where the robot listens unless configured otherwise
 MAGIC = b"STAU"
 KEY_ROOT = "servotau"
 
@@ -232,19 +230,11 @@ def decode_command(buf: bytes, joint_names: Sequence[str]) -> Command:
 
 # ---------------------------------------------------------------------------------------------- truth
 
-def _truth_cls():
-    # Imported lazily: hal/ must not import simrobot (and maybe MuJoCo) at import time.
-    from servotau.simrobot.truth import GroundTruth
-
-    return GroundTruth
-
-
 @functools.lru_cache(maxsize=8)
 def truth_layout(n_joints: int) -> tuple[tuple[str, tuple[int, ...]], ...]:
     """``(field, shape)`` of each GroundTruth field, in the order of ``GroundTruth.to_vector``."""
-    cls = _truth_cls()
-    probe = cls.from_vector(0.0, 0, np.zeros(100 * n_joints + 10_000), n_joints)
-    return tuple((f, np.shape(getattr(probe, f))) for f in cls.FIELDS)
+    probe = GroundTruth.from_vector(0.0, 0, np.zeros(100 * n_joints + 10_000), n_joints)
+    return tuple((f, np.shape(getattr(probe, f))) for f in GroundTruth.FIELDS)
 
 
 def truth_size(n_joints: int) -> int:
@@ -271,7 +261,7 @@ def decode_truth(buf: bytes, n_joints: int) -> GroundTruth:
     vec = np.frombuffer(buf, _F8, size, HEADER_SIZE)
     if not _all_finite(vec):
         raise MalformedMessage(f"truth {h[4]} has non-finite values: expected finite values")
-    return _truth_cls().from_vector(h[5], h[4], vec, n_joints)
+    return GroundTruth.from_vector(h[5], h[4], vec, n_joints)
 
 
 # ---------------------------------------------------------------------------------------------- info
@@ -288,7 +278,12 @@ def info_to_json(info: RobotInfo) -> str:
         "model_path": info.model_path,
         "ft_sensor_names": list(info.ft_sensor_names),
         "max_position_error": info.max_position_error,
+        "ft_sensor_frames": list(info.ft_sensor_frames),
+        "root_joint": info.root_joint,
     })
+
+
+_INFO_OPTIONAL = ("ft_sensor_frames", "root_joint")  # absent from older peers and logs: RobotInfo's defaults
 
 
 def info_from_json(text: str | bytes) -> RobotInfo:
@@ -311,6 +306,7 @@ def info_from_json(text: str | bytes) -> RobotInfo:
             model_path=d["model_path"],
             ft_sensor_names=tuple(d["ft_sensor_names"]),
             max_position_error=float(d["max_position_error"]),
+            **{k: (tuple(d[k]) if k == "ft_sensor_frames" else d[k]) for k in _INFO_OPTIONAL if k in d},
         )
     except KeyError as exc:
         raise MalformedMessage(f"RobotInfo JSON lacks field {exc}") from None

@@ -1,11 +1,11 @@
-"""hal/realtime.py: SCHED_FIFO for a HAL process, validated, and never fatal when refused."""
+"""hal/robot/realtime.py: SCHED_FIFO for a HAL process, validated, and never fatal when refused."""
 
 from __future__ import annotations
 
 import pytest
 
-from servotau.hal import realtime
 from servotau.hal.errors import HalError
+from servotau.hal.robot import realtime
 
 
 @pytest.mark.parametrize("bad", [-1, 100, 1.5, True, "50"])
@@ -39,9 +39,10 @@ def test_granted_priority_is_requested_for_the_calling_thread(monkeypatch):
 
 def test_zenoh_backend_from_config_asks_for_its_priority_before_the_session_opens(tmp_path, monkeypatch):
     """[hal.zenoh] realtime_priority reaches set_realtime_priority, before zenoh's threads exist."""
-    from hal_support import endpoint, free_port, robot_server
+    from support.hal import endpoint, free_port, robot_server
 
-    from servotau.hal import open_backend, zenoh_backend
+    from servotau.hal import open_backend
+    from servotau.hal.backends import zenoh as zenoh_backend
 
     calls = []
     real_session = zenoh_backend.Session

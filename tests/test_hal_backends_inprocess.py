@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-from fake_robot import FakeRobot
-from hal_controller import run
+from support.controller import run
 
 from servotau.hal import InProcessBackend, LogReader, SafetyConfig
+from servotau.simrobot.fake import FakeRobot
 
 
 def test_same_seed_same_log(tmp_path):

@@ -1,23 +1,28 @@
-"""open_backend: one line of config picks the backend; config errors name file, field and choices."""
+"""hal/registry.py: one line of config picks the backend, each backend reads its own table; errors name file,
+field and choices."""
 
 from __future__ import annotations
 
 import argparse
 
 import pytest
-from fake_robot import FakeRobot
 
 from servotau.config import CONFIG_DIR, load_toml
-from servotau.errors import ConfigError, HalTimeoutError
+from servotau.errors import ConfigError, HalError, HalTimeoutError
 from servotau.hal import (
+    BACKENDS,
     InProcessBackend,
     LogWriter,
     ReplayBackend,
+    available_backends,
+    backend_names,
     import_object,
     open_backend,
     overrides_from_args,
+    register,
     server_config,
 )
+from servotau.simrobot.fake import FakeRobot
 
 
 def _write(tmp_path, text: str):
@@ -36,7 +41,7 @@ def test_unknown_backend_names_file_field_and_choices(tmp_path):
 
 def test_inprocess_and_replay_from_config(tmp_path):
     """inprocess builds the robot from an import string (+ kwargs); replay opens a log."""
-    p = _write(tmp_path, '[hal]\nbackend = "inprocess"\n[hal.inprocess]\nrobot = "fake_robot:FakeRobot"\n'
+    p = _write(tmp_path, '[hal]\nbackend = "inprocess"\n[hal.inprocess]\nrobot = "servotau.simrobot.fake:FakeRobot"\n'
                          "[hal.inprocess.kwargs]\nseed = 3\n[hal.safety]\nhold_after = 0.02\n")
     with open_backend(p) as b:
         assert isinstance(b, InProcessBackend) and b.firmware.safety.hold_after == 0.02
@@ -73,7 +78,7 @@ def test_defaults_file_and_server_config():
 def test_command_line_overrides(tmp_path):
     """--backend replaces the config's choice (still validated); --port replaces the zenoh endpoint."""
     p = _write(tmp_path, '[hal]\nbackend = "zenoh"\n[hal.zenoh]\nconnect_timeout = 0.2\n'
-                         '[hal.inprocess]\nrobot = "fake_robot:FakeRobot"\n')
+                         '[hal.inprocess]\nrobot = "servotau.simrobot.fake:FakeRobot"\n')
     with open_backend(p, backend="inprocess") as b:
         assert isinstance(b, InProcessBackend)
     with pytest.raises(ConfigError, match=r"with --backend\): field 'hal.backend' = 'ros'"):
@@ -90,3 +95,28 @@ def test_realtime_priority_is_validated(tmp_path):
     with pytest.raises(ConfigError, match=r"field 'hal.server.realtime_priority' = 120: expected an integer >= 0 "
                                           r"<= 99"):
         server_config(_write(tmp_path, "[hal.server]\nrealtime_priority = 120\n"))
+
+
+def test_each_backend_module_reads_its_own_table():
+    """Every registered backend's module has from_config; the registry parses only [hal] backend."""
+    from servotau.hal.registry import backend_module
+
+    for name in backend_names():
+        assert callable(backend_module(name).from_config), name
+    assert set(BACKENDS) <= set(backend_names()) and available_backends()["inprocess"] is None
+
+
+def test_a_missing_optional_dependency_disables_one_backend_with_a_clear_message(tmp_path, monkeypatch):
+    """A backend whose package is absent is reported as unavailable (what to install); the others still open."""
+    from servotau.hal import registry
+
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    register("ros", "servotau_ros_backend", ("servotau_no_such_package",), "pip install servotau-no-such-package")
+    why = available_backends()["ros"]
+    assert "servotau_no_such_package" in why and "pip install servotau-no-such-package" in why
+    p = _write(tmp_path, '[hal]\nbackend = "ros"\n[hal.ros]\n'
+                         '[hal.inprocess]\nrobot = "servotau.simrobot.fake:FakeRobot"\n')
+    with pytest.raises(HalError, match=r'backend "ros" is unavailable: .*servotau_no_such_package'):
+        open_backend(p)
+    with open_backend(p, backend="inprocess") as b:
+        assert isinstance(b, InProcessBackend)

@@ -1,7 +1,7 @@
 """Robot side of the HAL: serves a :class:`ServedRobot` over Zenoh behind the firmware safety.
 
 Per tick k: read the sensors, publish frame k (and ground truth k), take the command, run the
-firmware (:mod:`servotau.hal.firmware`), step the robot. Clock modes:
+firmware (:mod:`servotau.hal.robot.firmware`), step the robot. Clock modes:
 
 - ``lockstep`` (default): wait for the command answering frame k, then step: as fast as the
   controller, deterministic. Before the first command the robot does not move and frame 0 is
@@ -25,72 +25,26 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import zenoh
 
-from servotau.config import Section
-
-from .errors import HalError, MalformedMessage, ProtocolVersionMismatch
-from .firmware import Firmware, FirmwareState, SafetyConfig
-from .log import LogWriter
-from .protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
-from .realtime import check_priority, set_realtime_priority, set_timer_slack
+from ..config import import_object
+from ..errors import MalformedMessage, ProtocolVersionMismatch
+from ..log import LogWriter
+from ..wire.protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
+from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
+from .config import CLOCKS, ServerConfig
+from .firmware import LOG_EXTRA, Firmware, FirmwareState, SafetyConfig
+from .realtime import set_realtime_priority, set_timer_slack
 from .served import ServedRobot
-from .zenoh_session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
+
+__all__ = ["CLOCKS", "LOG_EXTRA", "RobotServer", "ServerConfig", "main", "serve"]
 
 logger = logging.getLogger(__name__)
 
-CLOCKS = ("lockstep", "realtime", "robot")
-LOG_EXTRA = ("hal/state", "hal/wall_time")  # firmware state (FirmwareState) and time.monotonic() [s]
 _RTT_WINDOW = 100_000  # last RTT samples kept for the percentiles
-
-
-@dataclass(frozen=True)
-class ServerConfig:
-    """How a robot is served (``[server]`` table of a config, see :meth:`from_section`)."""
-
-    robot: str | None = None  # robot name in the key expressions; None: RobotInfo.name
-    listen: tuple[str, ...] = (DEFAULT_ENDPOINT,)
-    connect: tuple[str, ...] = ()
-    mode: str = "peer"  # zenoh mode: peer, or client of a router
-    clock: str = "lockstep"  # lockstep, realtime or robot
-    safety: SafetyConfig = field(default_factory=SafetyConfig)
-    republish_interval: float = 0.02  # [s] lock-step: republish the frame while waiting for a controller
-    log: str | None = None  # Parquet log of what was served (frames, applied q_des, truth)
-    max_ticks: int | None = None  # stop after this many steps
-    publish_truth: bool = True
-    realtime_priority: int = 0  # SCHED_FIFO priority of the process (hal/realtime.py); 0: ordinary scheduling
-
-    def __post_init__(self):
-        if self.clock not in CLOCKS:
-            raise HalError(f"server clock {self.clock!r}: expected one of {list(CLOCKS)}")
-        check_priority(self.realtime_priority, "server realtime_priority")
-
-    @classmethod
-    def from_section(cls, s: Section, safety: SafetyConfig | None = None) -> ServerConfig:
-        """Read robot, listen, connect, mode, clock, republish_interval, log, max_ticks, publish_truth;
-        every error names the file and the field (see :func:`servotau.hal.factory.server_config`)."""
-        from .factory import _str_list
-
-        s.check_keys(["robot", "listen", "connect", "mode", "clock", "republish_interval", "log", "max_ticks",
-                      "publish_truth", "realtime_priority"])
-        connect = _str_list(s, "connect", [])
-        return cls(
-            robot=s.str("robot") if "robot" in s else None,
-            listen=tuple(_str_list(s, "listen", [] if connect else [DEFAULT_ENDPOINT])),
-            connect=tuple(connect),
-            mode=s.str("mode", "peer", choices=["peer", "client"]),
-            clock=s.str("clock", "lockstep", choices=CLOCKS),
-            safety=safety or SafetyConfig(),
-            republish_interval=s.float("republish_interval", 0.02, min=0, strict_min=True, unit="s"),
-            log=s.str("log") if "log" in s else None,
-            max_ticks=s.int("max_ticks", min=1) if "max_ticks" in s else None,
-            publish_truth=s.bool("publish_truth", True),
-            realtime_priority=s.int("realtime_priority", 0, min=0, max=99),
-        )
 
 
 class RobotServer:
@@ -381,8 +335,6 @@ def serve(robot: ServedRobot, config: ServerConfig | None = None,
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m servotau.hal``: serve a robot built from an import string."""
-    from .factory import import_object
-
     p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0])
     p.add_argument("--robot", required=True, help="robot factory, 'module:callable'")
     p.add_argument("--scenario", help="scenario config path passed to the factory")

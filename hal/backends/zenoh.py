@@ -1,4 +1,4 @@
-"""Controller side of the HAL over Zenoh (the robot side is :mod:`servotau.hal.server`)."""
+"""Controller side of the HAL over Zenoh (the robot side is :mod:`servotau.hal.robot.server`)."""
 
 from __future__ import annotations
 
@@ -9,14 +9,19 @@ import struct
 import threading
 import time
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import zenoh
 
-from .backend import Backend
-from .errors import HalError, HalTimeoutError, MalformedMessage, RobotLost
-from .protocol import (
+from servotau.config import Section
+
+from ..backend import Backend
+from ..config import endpoint_list, with_override
+from ..errors import HalError, HalTimeoutError, MalformedMessage, RobotLost
+from ..robot.realtime import set_realtime_priority
+from ..types import GroundTruth, SensorFrame
+from ..wire.protocol import (
     FLAG_HOLDING,
     FLAG_SERVO_OFF,
     FLAG_WAITING,
@@ -28,12 +33,7 @@ from .protocol import (
     info_from_json,
     keys,
 )
-from .realtime import set_realtime_priority
-from .types import SensorFrame
-from .zenoh_session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
-
-if TYPE_CHECKING:
-    from servotau.simrobot.truth import GroundTruth
+from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 
 logger = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ class ZenohBackend(Backend):
         truth: subscribe to the ground truth (simulation; False saves the robot and this process
             encoding, sending and decoding it every tick).
         realtime_priority: SCHED_FIFO priority 1..99 of the calling thread (the control loop) and of
-            zenoh's threads (:mod:`servotau.hal.realtime`); 0: ordinary scheduling.
+            zenoh's threads (:mod:`servotau.hal.robot.realtime`); 0: ordinary scheduling.
     """
 
     def __init__(
@@ -302,3 +302,23 @@ class ZenohBackend(Backend):
             self._cond.notify_all()
         self._wake()
         self._session.close()
+
+
+def from_config(hal: Section, *, port: int | None = None) -> ZenohBackend:
+    """Open a :class:`ZenohBackend` from ``[hal.zenoh]`` (``port``: connect to ``tcp/127.0.0.1:<port>``
+    instead of the configured endpoints); every error names the file and the field."""
+    z = hal.section("zenoh", {})
+    z.check_keys(["robot", "connect", "listen", "mode", "connect_timeout", "frame_timeout", "truth",
+                  "realtime_priority"])
+    if port is not None:
+        z = with_override(z, "connect", [f"tcp/127.0.0.1:{port}"], "--port")
+    return ZenohBackend(
+        z.str("robot", "hrp2"),
+        connect=endpoint_list(z, "connect", [DEFAULT_ENDPOINT]),
+        listen=endpoint_list(z, "listen", []),
+        mode=z.str("mode", "peer", choices=["peer", "client"]),
+        connect_timeout=z.float("connect_timeout", 10.0, min=0, strict_min=True, unit="s"),
+        frame_timeout=z.float("frame_timeout", 0.1, min=0, strict_min=True, unit="s"),
+        truth=z.bool("truth", True),
+        realtime_priority=z.int("realtime_priority", 0, min=0, max=99),
+    )

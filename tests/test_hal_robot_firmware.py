@@ -6,11 +6,11 @@ import logging
 
 import numpy as np
 import pytest
-from fake_robot import FakeRobot
 
 from servotau.config import Section
 from servotau.errors import ConfigError, HalError
 from servotau.hal import Firmware, FirmwareState, SafetyConfig
+from servotau.simrobot.fake import FakeRobot
 
 INFO = FakeRobot().info
 Q = np.zeros(INFO.nq)
@@ -70,7 +70,7 @@ def test_clamps_to_joint_limits_with_rate_limited_warning(caplog):
     fw = Firmware(INFO, SafetyConfig(max_position_error=10.0, warn_interval=60.0))
     q_des = Q.copy()
     q_des[1] = 3.0
-    with caplog.at_level(logging.WARNING, logger="servotau.hal.firmware"):
+    with caplog.at_level(logging.WARNING, logger="servotau.hal.robot.firmware"):
         for k in range(100):
             fw.accept(q_des, k * 1e-3)
             out = fw.output(Q, k * 1e-3)
@@ -81,7 +81,7 @@ def test_clamps_to_joint_limits_with_rate_limited_warning(caplog):
 def test_reject_counts_and_rate_limits(caplog):
     """Rejected commands are counted one by one and logged at a limited rate."""
     fw = Firmware(INFO, SafetyConfig(warn_interval=60.0))
-    with caplog.at_level(logging.WARNING, logger="servotau.hal.firmware"):
+    with caplog.at_level(logging.WARNING, logger="servotau.hal.robot.firmware"):
         for _ in range(1000):
             fw.reject("bad")
         fw.reject("old", version=True)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fake_robot import FakeRobot
 
 from servotau.errors import HalError
 from servotau.hal import EndOfLog, InProcessBackend, LogWriter, ReplayBackend
+from servotau.simrobot.fake import FakeRobot
 
 
 def _record(path, n=300):

@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .backend import Backend
-from .errors import EndOfLog
-from .log import LogReader
-from .types import SensorFrame
+from servotau.config import Section
 
-if TYPE_CHECKING:
-    from servotau.simrobot.truth import GroundTruth
+from ..backend import Backend
+from ..errors import EndOfLog
+from ..log import LogReader
+from ..types import GroundTruth, SensorFrame
 
 
 class ReplayBackend(Backend):
@@ -57,3 +55,13 @@ class ReplayBackend(Backend):
     def status(self) -> dict:
         return {"robot": self.info.name, "clock": "replay", "path": str(self.path), "frames": len(self._frames),
                 "next": self._next, "commands": len(self.commands)}
+
+
+def from_config(hal: Section, *, port: int | None = None) -> ReplayBackend:
+    """Open a :class:`ReplayBackend` on ``[hal.replay] log`` (``port`` is not used)."""
+    r = hal.section("replay")
+    r.check_keys(["log"])
+    path = r.str("log")
+    if not Path(path).exists():
+        raise r.error("log", path, "an existing log file (.parquet)")
+    return ReplayBackend(path)

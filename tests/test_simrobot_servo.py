@@ -63,7 +63,7 @@ def test_command_delay_effect_delays_by_ticks(tmp_path):
 def test_every_effect_has_parameters_and_is_off_by_default(tmp_path):
     """All the hidden effects are known to the config loader and none is on in config/servo.toml."""
     assert set(EFFECT_PARAMS) == set(EFFECTS)
-    from servotau.simrobot.model import JOINT_NAMES
+    from servotau.description import JOINT_NAMES
 
     p = load_servo_params(CONFIG_DIR / "servo.toml", JOINT_NAMES, np.full(30, 0.1))
     for f in ("tau_c_asym", "e_deadzone", "mu_load", "cog_amp", "thermal_alpha", "gear_k", "backlash"):
@@ -73,7 +73,7 @@ def test_every_effect_has_parameters_and_is_off_by_default(tmp_path):
 
 def test_default_servo_matches_real_hrp2_leg_within_factor_two():
     """Nominal k_tau and k_v of the default right-leg servo are within x2 of the real robot's."""
-    from servotau.simrobot.model import JOINT_NAMES
+    from servotau.description import JOINT_NAMES
 
     p = load_servo_params(CONFIG_DIR / "servo.toml", JOINT_NAMES, np.full(30, 0.1))
     real_k_tau = np.array([2.12e-4, 3.0e-5, 1.2e-4, 5.1e-5, 1.77e-4, 2.4e-4])

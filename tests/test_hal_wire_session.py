@@ -5,10 +5,10 @@ from __future__ import annotations
 import sys
 
 import pytest
-from hal_support import endpoint, free_port
+from support.hal import endpoint, free_port
 
 from servotau.hal.errors import HalError
-from servotau.hal.zenoh_session import GIL_SWITCH_INTERVAL, Session, zenoh_config
+from servotau.hal.wire.session import GIL_SWITCH_INTERVAL, Session, zenoh_config
 
 
 def test_config_needs_an_endpoint_and_a_known_mode():
@@ -36,7 +36,7 @@ def test_opening_a_session_lowers_the_gil_switch_interval_and_keeps_a_lower_one(
 
 _THREADS_OF_A_LINK = """
 import os, sys, time
-from servotau.hal.zenoh_session import Session, zenoh_config
+from servotau.hal.wire.session import Session, zenoh_config
 port = int(sys.argv[1])
 a = Session(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"]))
 b = Session(zenoh_config(connect=[f"tcp/127.0.0.1:{port}"]))

@@ -15,7 +15,8 @@ from servotau.errors import HalError
 
 __all__ = ["ENV", "controller", "endpoint", "free_port", "robot_server", "stop_process"]
 
-TESTS = Path(__file__).resolve().parent
+SUPPORT = Path(__file__).resolve().parent
+TESTS = SUPPORT.parent
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]))
 
 
@@ -39,7 +40,7 @@ def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep"
                  servo_off_after: float | None = None, timeout: float = 20.0):
     """A FakeRobot served over Zenoh in a subprocess; killed on exit whatever happens."""
     ready = tmp / f"ready-{port}"
-    args = [sys.executable, "-m", "servotau.hal", "--robot", "fake_robot:FakeRobot",
+    args = [sys.executable, "-m", "servotau.hal", "--robot", "servotau.simrobot.fake:FakeRobot",
             "--kwargs", json.dumps({"seed": seed}), "--listen", endpoint(port), "--clock", clock,
             "--ready-file", str(ready)]
     if log is not None:
@@ -64,7 +65,7 @@ def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep"
 
 
 def controller(port: int, *args: str) -> subprocess.Popen:
-    """tests/hal_controller.py in a subprocess (stdout and stderr piped)."""
-    return subprocess.Popen([sys.executable, str(TESTS / "hal_controller.py"), "--connect", endpoint(port), *args],
+    """tests/support/controller.py in a subprocess (stdout and stderr piped)."""
+    return subprocess.Popen([sys.executable, str(SUPPORT / "controller.py"), "--connect", endpoint(port), *args],
                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=_die_with_parent)

@@ -26,11 +26,14 @@ import numpy as np
 
 from servotau.config import Section
 
-from .errors import HalError
-from .protocol import FLAG_CLAMPED, FLAG_HOLDING, FLAG_SERVO_OFF, FLAG_WAITING
-from .types import RobotInfo
+from ..errors import HalError
+from ..types import RobotInfo
+from ..wire.protocol import FLAG_CLAMPED, FLAG_HOLDING, FLAG_SERVO_OFF, FLAG_WAITING
 
 logger = logging.getLogger(__name__)
+
+LOG_EXTRA = ("hal/state", "hal/wall_time")
+"""Extra log columns of the robot side: firmware state (FirmwareState) and time.monotonic() [s]."""
 
 
 class FirmwareState(IntEnum):

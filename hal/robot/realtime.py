@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import os
 
-from .errors import HalError
+from ..errors import HalError
 
 logger = logging.getLogger(__name__)
 

@@ -4,18 +4,18 @@ experiments."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from .backend import Backend
-from .firmware import Firmware, SafetyConfig
-from .log import LogWriter
-from .served import ServedRobot
-from .types import SensorFrame
+from servotau.config import Section
 
-if TYPE_CHECKING:
-    from servotau.simrobot.truth import GroundTruth
+from ..backend import Backend
+from ..config import import_object
+from ..errors import HalError
+from ..log import LogWriter
+from ..robot.config import safety_config
+from ..robot.firmware import LOG_EXTRA, Firmware, SafetyConfig
+from ..robot.served import ServedRobot
+from ..types import GroundTruth, SensorFrame
 
 
 class InProcessBackend(Backend):
@@ -39,8 +39,6 @@ class InProcessBackend(Backend):
         self._truth_before_step = None  # (seq, GroundTruth) of the last stepped tick
         self._log = None
         if log:
-            from .server import LOG_EXTRA
-
             self._log = LogWriter(log, robot.info, truth=True, extra=LOG_EXTRA,
                                   metadata={"servotau.source": "inprocess"})
         super().__init__(robot.info, self._current)
@@ -100,3 +98,19 @@ class InProcessBackend(Backend):
             self._log.close()
         super().close()
 
+
+
+def from_config(hal: Section, *, port: int | None = None) -> InProcessBackend:
+    """Build the robot of ``[hal.inprocess]`` (``robot = "module:callable"``, called as
+    ``factory(scenario, **kwargs)``) behind the firmware of ``[hal.safety]`` (``port`` is not used)."""
+    i = hal.section("inprocess")
+    i.check_keys(["robot", "scenario", "log", "kwargs"])
+    spec = i.str("robot")
+    try:
+        factory = import_object(spec)
+    except HalError as exc:
+        raise i.error("robot", spec, f"an importable 'module:callable' robot factory ({exc})") from exc
+    scenario = i.str("scenario") if "scenario" in i else None
+    kwargs = dict(i.section("kwargs", {}).data)
+    robot = factory(scenario, **kwargs) if scenario is not None else factory(**kwargs)
+    return InProcessBackend(robot, safety_config(hal), log=i.str("log") if "log" in i else None)
