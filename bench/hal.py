@@ -48,9 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
+from servotau.apps.processes import free_port, stop_process, wait_ready
 from servotau.hal import ZenohBackend
 from servotau.hal.wire.protocol import decode_frame, encode_frame
-from servotau.apps.processes import free_port, stop_process, wait_ready
 from servotau.simrobot.fake import FakeRobot
 
 FAKE_ROBOT = "servotau.simrobot.fake:FakeRobot"
