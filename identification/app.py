@@ -122,7 +122,8 @@ def collect_main(args) -> int:
 def fit_main(args) -> int:
     from dataclasses import replace
 
-    from .loss import Loss
+    from servotau.actuator.loss import Loss
+
     from .pipeline import fit_log, write_motor_file
     from .plan import load_plan, parse_joints
 

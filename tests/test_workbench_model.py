@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from test_workbench_diagnose import synthetic_table
 
+from servotau.actuator import ONLINE_SIGNALS, OnlineModel
 from servotau.errors import IdentificationError
 from servotau.identification import EffectTerm, MotorModel, MotorParameters
 from servotau.identification.workbench import (
@@ -19,7 +20,6 @@ from servotau.identification.workbench import (
     register_effect,
 )
 from servotau.identification.workbench.ladder import add_effects, save_model
-from servotau.identification.workbench.online import ONLINE_SIGNALS, OnlineModel
 
 LIBRARY = ("coulomb", "coulomb_asym", "stribeck", "stiction", "deadzone", "direction_gain", "backlash",
            "load_friction", "cogging", "thermal_drift", "saturation", "elastic", "motor_lag", "delay")
@@ -99,8 +99,8 @@ def test_online_command_solves_for_the_delayed_command():
 def test_saturation_holds_the_limit_with_hysteresis_and_integrates_the_command_lead():
     """The limit detector is the recursion s[k] = x[k] > (off if s[k-1] else on); the term is the change of
     q_des(t - 1) - q(t) since the onset of each saturated run, zero at the onset and below the limit."""
-    from servotau.identification.workbench.library import saturation
-    from servotau.identification.workbench.signals import Signals, hysteresis
+    from servotau.actuator.effects.saturation import saturation
+    from servotau.actuator.signals import Signals, hysteresis
 
     x = np.array([0.0, 5.0, 11.0, 9.0, 7.0, 12.0, 3.0, 9.5, 10.5, 8.5])
     s, expected = False, []
@@ -138,8 +138,10 @@ def test_deadzone_crossing_form_follows_the_command_lead_inside_the_band():
     """Crossing form: sign(m) outside the band; inside, the sign of the last effort outside plus the command's
     lead since the entry over the width (the joint crosses the band freely from the edge it entered at); it
     enters at |m| <= band and leaves at |m| > 1.5 band."""
-    from servotau.identification.workbench.library import _deadzone_columns, _deadzone_fold, deadzone
-    from servotau.identification.workbench.signals import Signals
+    from servotau.actuator.effects.deadzone import columns as _deadzone_columns
+    from servotau.actuator.effects.deadzone import deadzone
+    from servotau.actuator.effects.deadzone import fold as _deadzone_fold
+    from servotau.actuator.signals import Signals
 
     # [rad] band 1 mrad: inside from 2 (|u| <= 1 mrad) to 4 (hysteresis: 1.2 mrad is not beyond 1.5 band), and 6-7
     u = np.array([2.0, 1.5, 0.5, -1.2, 0.2, -2.0, -0.4, 0.3]) * 1e-3
@@ -159,7 +161,7 @@ def test_deadzone_crossing_form_follows_the_command_lead_inside_the_band():
 def test_deadzone_crossing_form_reads_the_command_online_and_offline():
     """Only the crossing form needs q and q_des (named when missing); on-line it equals the batch evaluation
     and does not read this tick's command, so command() needs no division."""
-    from servotau.identification.workbench.online import required_signals
+    from servotau.actuator import required_signals
 
     c, _ = signals(1.0)
     legacy, crossing = model_with("deadzone"), MotorModel(k_tau=5e-5, k_v=6e-3, k_c=1e-4, provenance="test",

@@ -21,13 +21,11 @@ import sys
 import time
 from pathlib import Path
 
+from servotau.actuator import Loss, effect_names
 from servotau.errors import IdentificationError
 
-from ..loss import Loss
-from . import library as _library  # noqa: F401  (registers the built-in effects)
 from .data import OFFLINE_ESTIMATE, ROLES, align_torque, describe, load_dataset
 from .diagnose import MIN_GAIN, diagnose
-from .effects import effect_names
 from .evaluate import DEFAULT_FOLDS, compare, folds_of
 from .ladder import add_effects, save_model
 from .model import FittedModel, parse_spec
@@ -155,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     comparison = diagnosis = ladder = None
     if args.model_command == "compare":
         if args.model:
-            from ..motor_params import MotorParameters
+            from servotau.actuator import MotorParameters
 
             params = MotorParameters.load_toml(args.model)
             joint = ds.joint or (next(iter(params)) if len(params) == 1 else None)
