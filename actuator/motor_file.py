@@ -31,9 +31,10 @@ from pathlib import Path
 from servotau.config import Section, load_toml
 from servotau.errors import IdentificationError
 
-from . import toml_writer as tw
 from .loss import LOSS_KINDS, Loss
 from .model import EffectTerm, FitMetrics, MotorModel
+from .toml_writer import key as toml_key
+from .toml_writer import value as toml_value
 
 FORMAT_VERSION = 1
 
@@ -72,28 +73,28 @@ class MotorParameters(Mapping[str, MotorModel]):
             f"version = {FORMAT_VERSION}",
         ]
         for joint, m in self.models.items():
-            table = f"joints.{tw.key(joint)}"
-            lines += ["", f"[{table}]", f"k_tau = {tw.value(m.k_tau)}", f"k_v = {tw.value(m.k_v)}"]
+            table = f"joints.{toml_key(joint)}"
+            lines += ["", f"[{table}]", f"k_tau = {toml_value(m.k_tau)}", f"k_v = {toml_value(m.k_v)}"]
             if m.k_c is not None:
-                lines.append(f"k_c = {tw.value(m.k_c)}")
-            lines.append(f"loss = {tw.value(m.loss.kind)}")
+                lines.append(f"k_c = {toml_value(m.k_c)}")
+            lines.append(f"loss = {toml_value(m.loss.kind)}")
             if m.loss.w is not None:
-                lines.append(f"w = {tw.value(m.loss.w)}")
-            lines.append(f"provenance = {tw.value(m.provenance)}")
+                lines.append(f"w = {toml_value(m.loss.w)}")
+            lines.append(f"provenance = {toml_value(m.provenance)}")
             if m.metrics is not None:
                 lines += [
                     "",
                     f"[{table}.metrics]",
-                    f"rms = {tw.value(m.metrics.rms)}",
-                    f"overestimation_rate = {tw.value(m.metrics.overestimation_rate)}",
-                    f"n_samples = {tw.value(m.metrics.n_samples)}",
+                    f"rms = {toml_value(m.metrics.rms)}",
+                    f"overestimation_rate = {toml_value(m.metrics.overestimation_rate)}",
+                    f"n_samples = {toml_value(m.metrics.n_samples)}",
                 ]
             for name, term in m.extra.items():
                 lines += [
                     "",
-                    f"[{table}.extra.{tw.key(name)}]",
-                    f"coefficient = {tw.value(term.coefficient)}",
-                    f"shape = {tw.value(dict(term.shape))}",
+                    f"[{table}.extra.{toml_key(name)}]",
+                    f"coefficient = {toml_value(term.coefficient)}",
+                    f"shape = {toml_value(dict(term.shape))}",
                 ]
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
