@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from servotau.estimation.savgol import CausalSavgol
+from servotau.signal.savgol import CausalSavgol
 
 
 def time_update(n_channels: int, n_updates: int = 20_000, n_runs: int = 5) -> float:

@@ -15,10 +15,10 @@ from types import MappingProxyType
 
 import numpy as np
 
+from servotau.actuator import MotorModel, MotorParameters, checked_online_model, effect_names
 from servotau.config import CONFIG_DIR, Section, load_toml, resolve_config_path
-from servotau.errors import ConfigError, ControlError
+from servotau.errors import ConfigError, ControlError, IdentificationError
 from servotau.hal.types import FT_SENSOR_NAMES, RobotInfo
-from servotau.identification.motor_params import MotorModel, MotorParameters
 
 from .gains import kd_from_k7, ks_from_k6
 
@@ -317,10 +317,6 @@ def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: flo
     Raises:
         ConfigError: Naming the motor file, the field ``joints.<joint>.extra.<term>`` and what was expected.
     """
-    from servotau.identification.workbench.effects import effect_names
-
-    from .torque import online_model
-
     known = effect_names()
     for joint, m in motors.items():
         for name, term in m.extra.items():
@@ -330,10 +326,10 @@ def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: flo
                                   f"the model workbench's effects {known}")
             try:
                 one = MotorModel(k_tau=m.k_tau, k_v=m.k_v, extra={name: term}, provenance=m.provenance)
-                online_model(joint, one, period)
-            except ControlError as err:
-                raise ConfigError(f"{file}: field '{field_}' (shape {dict(term.shape)}): {err}: expected the "
-                                  f"shape parameters of effect '{name}'") from err
+                checked_online_model(one, period)
+            except IdentificationError as err:
+                raise ConfigError(f"{file}: field '{field_}' (shape {dict(term.shape)}): joint \"{joint}\": {err}: "
+                                  f"expected the shape parameters of effect '{name}'") from err
 
 
 K7_SCALINGS = ("constant", "inverse_sqrt_k6")

@@ -625,8 +625,8 @@ def _identification_table(out: Path) -> str:
     """The motor files' parameters against the simulator's servo (ground truth, read here for evaluation only): the
     linear part ``k_tau = 1/kp``, ``k_v = (kd + b)/kp``, Coulomb ``tau_c/kp`` and the driver dead zone
     ``i_deadzone k_t/kp`` (both in [rad] of command error)."""
+    from servotau.actuator import MotorParameters
     from servotau.config import CONFIG_DIR
-    from servotau.identification.motor_params import MotorParameters
     from servotau.simrobot.model import JOINT_NAMES
     from servotau.simrobot.servo_config import load_servo_params
 

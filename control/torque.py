@@ -7,12 +7,12 @@
     extra  = model(tau*, dq_hat, q_hat, ddq_hat, t, q_des) - (K_tau tau* + K_v dq_hat + k_c sign(dq_hat))
     q_des  = q + dq_err                                     (the servo only takes desired angles)
 
-``K_tau``, ``K_v``, ``k_c`` are the identified motor model (:class:`~servotau.identification.MotorModel`).
+``K_tau``, ``K_v``, ``k_c`` are the identified motor model (:class:`~servotau.actuator.MotorModel`).
 The integral is clamped so that ``|K_i integral| <= integral_limit`` (anti-windup).
 
 ``extra`` is what the motor model's extra effect terms (model workbench: ``deadzone``, ``direction_gain``,
 ``stribeck``, ``delay``, ...) add to the paper's linear model, evaluated one tick at a time by an
-:class:`~servotau.identification.workbench.online.OnlineModel` per joint (effects with memory keep their
+:class:`~servotau.actuator.online.OnlineModel` per joint (effects with memory keep their
 state there; it advances once per :meth:`JointTorqueController.update`). Every term of the file is used: a
 term the workbench does not know raises at construction. With a ``delay`` term the model reads this tick's
 command; ``OnlineModel.command`` solves ``q_des = q_hat + model(q_des)`` for it. A joint without ``k_c``
@@ -29,9 +29,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from servotau.actuator import MotorModel, OnlineModel, checked_online_model
 from servotau.errors import ControlError, IdentificationError
-from servotau.identification.motor_params import MotorModel
-from servotau.identification.workbench.online import OnlineModel
 
 from .config import ControlConfig, JointGains
 
@@ -189,8 +188,6 @@ def online_model(joint: str, m: MotorModel, period: float) -> OnlineModel:
         ControlError: An extra term or its shape parameters cannot be evaluated (named with the joint).
     """
     try:
-        om = m.online(period)
-        om.predict(0.0, 0.0, q=0.0, q_des=0.0, t=0.0, ddq=0.0)
-    except (IdentificationError, KeyError, TypeError, ValueError) as err:
-        raise ControlError(f'joint "{joint}": motor-model extra terms {list(m.extra)}: {err}') from err
-    return om
+        return checked_online_model(m, period)
+    except IdentificationError as err:
+        raise ControlError(f'joint "{joint}": {err}') from err

@@ -1,5 +1,7 @@
 """servotau.estimation: joint torques from encoders, IMU and F/T sensors (Del Prete et al. 2015, section 2)."""
 
+from servotau.signal.savgol import CausalSavgol, savgol_centred
+
 from .calibration import Payload, calibrate_ft_offsets, calibrate_gyro_bias, identify_payload, payload_samples
 from .config import EstimatorConfig, FilterSettings, ModelPerturbation, PredictionSettings
 from .delay_line import DelayLine
@@ -8,7 +10,6 @@ from .estimator import Estimate, TorqueEstimator
 from .model import EstimatorModel, JointAddress, perturb_inertias
 from .offline import OfflineEstimate, estimate_offline, frames_to_arrays, replay
 from .prediction import ModelPredictor
-from .savgol import CausalSavgol, savgol_centred
 
 __all__ = [
     "CausalSavgol",

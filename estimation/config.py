@@ -16,8 +16,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from servotau.config import CONFIG_DIR, load_toml
-from servotau.errors import EstimationError
+from servotau.actuator import MotorModel, MotorParameters
+from servotau.config import CONFIG_DIR, Section, load_toml, resolve_config_path
+from servotau.errors import ConfigError, EstimationError, IdentificationError
 from servotau.hal.types import FT_SENSOR_NAMES
 
 DEFAULT_PATH: Path = CONFIG_DIR / "estimation.toml"
@@ -78,7 +79,8 @@ class PredictionSettings:
 
     The paper's actuator model (eq. 6 without Coulomb term), ``q_des - q = k_tau tau + k_v dq``,
     gives a zero-delay torque ``m = (q_des - q - k_v dq) / k_tau`` for the joints listed here; the
-    estimator corrects it with its own delayed estimate (see :mod:`.prediction`).
+    estimator corrects it with its own delayed estimate (see :mod:`.prediction`). In the TOML file the
+    joints' ``k_tau`` and ``k_v`` come from a motor file (``[prediction] motors``, :meth:`from_motors`).
     """
 
     k_tau: Mapping[str, float] = field(default_factory=dict)  # [rad/(N m)] per joint name
@@ -108,6 +110,34 @@ class PredictionSettings:
     @property
     def enabled(self) -> bool:
         return bool(self.k_tau)
+
+    @classmethod
+    def from_motors(cls, motors: Mapping[str, MotorModel], velocity_window: int = 20) -> PredictionSettings:
+        """``k_tau`` and ``k_v`` of the motor models ``motors`` (by joint name; e.g. a ``MotorParameters``)."""
+        return cls(k_tau={j: m.k_tau for j, m in motors.items()}, k_v={j: m.k_v for j, m in motors.items()},
+                   velocity_window=velocity_window)
+
+
+def _prediction(pred: Section) -> PredictionSettings:
+    """``[prediction]``: ``motors`` (a motor file of config/motors/, optional: no prediction without it),
+    ``joints`` (those of the file it predicts; default all) and ``velocity_window``."""
+    pred.check_keys(["motors", "joints", "velocity_window"])
+    velocity_window = pred.int("velocity_window", 20, min=4)
+    if "motors" not in pred:
+        if "joints" in pred:
+            raise pred.error("joints", pred.data["joints"], "no joints without a motor file (field 'motors')")
+        return PredictionSettings(velocity_window=velocity_window)
+    path = pred.str("motors")
+    try:
+        motors = MotorParameters.load_toml(resolve_config_path(path))
+    except (ConfigError, IdentificationError) as err:
+        raise ConfigError(f"{pred.file}: field 'prediction.motors' = {path!r}: {err}") from err
+    joints = pred.data.get("joints", list(motors))
+    if not isinstance(joints, list) or not all(isinstance(j, str) for j in joints):
+        raise pred.error("joints", joints, "a list of joint names")
+    if any(j not in motors for j in joints):
+        raise pred.error("joints", joints, f"joints with a motor model in {path}: {list(motors)}")
+    return PredictionSettings.from_motors({j: motors[j] for j in joints}, velocity_window)
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,10 +249,6 @@ class EstimatorConfig:
 
         mod = root.section("model", {})
         mod.check_keys(["mass_scale_std", "com_offset_std", "seed"])
-        pred = root.section("prediction", {})
-        pred.check_keys(["k_tau", "k_v", "velocity_window"])
-        k_tau = pred.section("k_tau", {})
-        k_v = pred.section("k_v", {})
         config = cls(
             encoders=filt("encoders"),
             imu=filt("imu"),
@@ -241,11 +267,7 @@ class EstimatorConfig:
                 com_offset_std=mod.float("com_offset_std", 0.0, min=0.0, max=0.5, unit="m"),
                 seed=mod.int("seed", 0, min=0),
             ),
-            prediction=PredictionSettings(
-                k_tau={j: k_tau.float(j, min=0.0, strict_min=True, unit="rad/(N m)") for j in k_tau.keys()},
-                k_v={j: k_v.float(j, unit="rad s/rad") for j in k_v.keys()},
-                velocity_window=pred.int("velocity_window", 20, min=4),
-            ),
+            prediction=_prediction(root.section("prediction", {})),
         )
         if variant == "centred":
             return config

@@ -34,13 +34,13 @@ import numpy as np
 
 from servotau.errors import EstimationError
 from servotau.hal.types import STATUS_NAMES, RobotInfo, SensorFrame
+from servotau.signal.savgol import CausalSavgol, delay
 
 from .config import EstimatorConfig
 from .delay_line import DelayLine
 from .dynamics import InverseDynamics
 from .model import EstimatorModel
 from .prediction import ModelPredictor
-from .savgol import CausalSavgol, delay
 
 _ENC, _IMU = STATUS_NAMES.index("encoders"), STATUS_NAMES.index("imu")
 

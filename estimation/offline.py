@@ -17,12 +17,12 @@ import numpy as np
 
 from servotau.errors import EstimationError
 from servotau.hal.types import STATUS_NAMES, RobotInfo, SensorFrame
+from servotau.signal.savgol import savgol_centred
 
 from .config import EstimatorConfig
 from .dynamics import InverseDynamics
 from .estimator import Estimate, TorqueEstimator
 from .model import EstimatorModel
-from .savgol import savgol_centred
 
 _ENC, _IMU = STATUS_NAMES.index("encoders"), STATUS_NAMES.index("imu")
 

@@ -23,10 +23,10 @@ from __future__ import annotations
 import numpy as np
 
 from servotau.errors import EstimationError
+from servotau.signal.savgol import CausalSavgol
 
 from .config import PredictionSettings
 from .delay_line import DelayLine
-from .savgol import CausalSavgol
 
 
 class ModelPredictor:

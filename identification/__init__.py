@@ -6,13 +6,14 @@ Model per joint: ``dq_err = q_des - q = k_tau tau + k_v dq [+ k_c sign(dq)]``, f
 a TOML motor-parameter file (:class:`MotorParameters`).
 """
 
+from servotau.actuator import EffectTerm, FitMetrics, MotorModel, MotorParameters
+from servotau.actuator.loss import Loss
+
 from .asymmetric import asymmetric_cost, fit_asymmetric
 from .fit import fit_linear_model, fit_with_loss
 from .least_squares import fit_least_squares
 from .linear_fit import LinearFit
-from .loss import Loss
 from .metrics import overestimation_rate, residual_rms, signed_excess
-from .motor_params import EffectTerm, FitMetrics, MotorModel, MotorParameters
 from .piecewise import PiecewiseFit, PiecewiseLinear, fit_piecewise, fit_piecewise_1d
 from .regressors import K_C, K_TAU, K_V, Regressors, linear_regressors, sign
 from .synthetic import SyntheticData, make_synthetic

@@ -19,14 +19,14 @@ import time
 
 import numpy as np
 
+from servotau.actuator.loss import Loss, check_weight
 from servotau.errors import IdentificationError
 
 from .asymmetric_qp import solve_osqp
 from .linear_fit import LinearFit, make_fit
-from .loss import Loss
 from .problem import Problem, prepare_problem
 from .regressors import Regressors
-from .validation import MAX_CONDITION, check_weight, label
+from .validation import MAX_CONDITION, label
 
 SOLVERS = ("newton", "osqp")
 

@@ -83,7 +83,7 @@ def rest_dead_band(dq_err: np.ndarray, tau: np.ndarray, dq: np.ndarray, k_tau: f
 def with_dead_band(model, d: float, band: float = BAND, provenance: str = ""):
     """``model`` (a :class:`~servotau.identification.MotorModel`) with its ``deadzone`` extra term replaced by the
     dead band ``d`` [rad] (shape ``band``, ``damping_share = 0``), first among the extra terms."""
-    from servotau.identification.motor_params import EffectTerm
+    from servotau.actuator import EffectTerm
 
     extra = {"deadzone": EffectTerm(float(d), {"band": float(band), "damping_share": 0.0})}
     extra.update({k: v for k, v in model.extra.items() if k != "deadzone"})
@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("motors", help="motor-parameter file to complete (its k_tau gives the rest residual)")
     p.add_argument("out", help="motor-parameter file to write")
     args = p.parse_args(argv)
-    from servotau.identification.motor_params import MotorParameters
+    from servotau.actuator import MotorParameters
     from servotau.identification.pipeline import load_aligned
     from servotau.identification.plan import load_plan
 

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from servotau.actuator.loss import Loss
+
 from .asymmetric import fit_asymmetric
 from .least_squares import fit_least_squares
 from .linear_fit import LinearFit
-from .loss import Loss
 from .regressors import Regressors, linear_regressors
 
 

@@ -6,8 +6,9 @@ import time
 
 import numpy as np
 
+from servotau.actuator.loss import Loss
+
 from .linear_fit import LinearFit, make_fit
-from .loss import Loss
 from .problem import prepare_problem
 from .regressors import Regressors
 from .validation import MAX_CONDITION

@@ -7,9 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from servotau.actuator.loss import Loss
 from servotau.errors import IdentificationError
 
-from .loss import Loss
 from .metrics import overestimation_rate, residual_rms
 from .regressors import Regressors
 

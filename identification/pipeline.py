@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
+from servotau.actuator import FitMetrics, MotorModel, MotorParameters
+from servotau.actuator.loss import Loss
 from servotau.errors import EstimationError, HalError, IdentificationError
 
 from .fit import fit_linear_model
 from .linear_fit import LinearFit
-from .loss import Loss
 from .metrics import overestimation_rate, residual_rms
-from .motor_params import FitMetrics, MotorModel, MotorParameters
 from .plan import PHASES, FitSettings, check_joints
 from .regressors import K_C, K_TAU, K_V
 from .session import META_BACKEND, META_DATE, META_JOINTS, PHASE_COLUMN

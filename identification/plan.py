@@ -21,11 +21,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from servotau.actuator.loss import LOSS_KINDS, Loss
 from servotau.config import Section, load_toml
 from servotau.errors import IdentificationError
 
 from .collect import HoldPlan, SweepPlan
-from .loss import LOSS_KINDS, Loss
 from .two_stage import DQ_STATIC
 
 DEFAULT_PLAN = "identification.toml"  # under config/

@@ -15,13 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from servotau.actuator.terms import K_C, K_TAU, K_V
 from servotau.errors import IdentificationError
 
 from .validation import as_samples, check_same_length
-
-K_TAU = "k_tau"  # [rad/(N m)]
-K_V = "k_v"  # [rad/(rad/s)]
-K_C = "k_c"  # [rad]
 
 
 @dataclass(frozen=True, eq=False)

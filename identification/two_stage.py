@@ -22,11 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from servotau.actuator.loss import Loss
 from servotau.errors import IdentificationError
 
 from .fit import fit_with_loss
 from .linear_fit import LinearFit
-from .loss import Loss
 from .metrics import overestimation_rate, residual_rms
 from .regressors import K_C, K_TAU, K_V, Regressors, sign
 from .validation import as_samples, check_same_length

@@ -58,15 +58,6 @@ def check_min_samples(n: int, minimum: int, what: str) -> None:
         raise IdentificationError(f"{what}: {n} samples: expected at least {minimum}")
 
 
-def check_weight(w: object) -> float:
-    """Return the asymmetric weight ``w`` as a float, or raise unless it is a finite number > 1."""
-    if isinstance(w, bool) or not isinstance(w, (int, float, np.floating, np.integer)) or not math.isfinite(w):
-        raise IdentificationError(f"w = {w!r}: expected a finite number > 1 (over-estimation weight)")
-    if w <= 1.0:
-        raise IdentificationError(f"w = {w!r}: expected a finite number > 1 (over-estimation weight)")
-    return float(w)
-
-
 def column_scales(names: tuple[str, ...], matrix: np.ndarray, *, what: str = "regressor") -> np.ndarray:
     """Return the RMS of every column; raise if a column is zero or does not vary (no excitation).
 

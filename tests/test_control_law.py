@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
+from servotau.actuator import MotorParameters
 from servotau.config import CONFIG_DIR
 from servotau.control.config import ControlConfig, ForceTask, JointGains, SafetyLimits
 from servotau.control.gains import k9_from_kf
 from servotau.control.law import TorqueControlLaw
-from servotau.identification.motor_params import MotorParameters
 from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH, default_joint_map, half_sitting_qpos
 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]

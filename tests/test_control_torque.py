@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
+from servotau.actuator import MotorModel, MotorParameters
 from servotau.config import CONFIG_DIR
 from servotau.control.config import JointGains
 from servotau.control.torque import JointTorqueController
 from servotau.errors import ConfigError, ControlError
-from servotau.identification.motor_params import MotorModel, MotorParameters
 from servotau.simrobot.model import JOINT_NAMES
 
 KNEE = JOINT_NAMES.index("RLEG_JOINT3")

@@ -42,12 +42,15 @@ def test_toml_errors_name_the_file_and_field(tmp_path):
 
 
 def test_toml_reads_calibration_perturbation_and_motor_parameters(tmp_path):
-    """Offsets, gyro bias, model perturbation and k_tau/k_v tables are read from the file."""
+    """Offsets, gyro bias, model perturbation and k_tau/k_v (from the motor file named there) are read."""
+    motors = tmp_path / "motors.toml"
+    motors.write_text('version = 1\n[joints.RLEG_JOINT3]\nk_tau = 5e-5\nk_v = 6.5e-3\nloss = "least_squares"\n'
+                      'provenance = "test"\n')
     path = tmp_path / "est.toml"
     path.write_text(
         "[calibration]\ngyro_bias = [0.001, 0.0, -0.002]\n[calibration.ft_offsets]\n"
         "left_wrist = [1, 2, 3, 0.1, 0.2, 0.3]\n[model]\nmass_scale_std = 0.1\nseed = 4\n"
-        "[prediction.k_tau]\nRLEG_JOINT3 = 5e-5\n[prediction.k_v]\nRLEG_JOINT3 = 6.5e-3\n"
+        f"[prediction]\nmotors = '{motors}'\n"
     )
     cfg = EstimatorConfig.from_toml(path)
     assert np.allclose(cfg.gyro_bias, [0.001, 0.0, -0.002])
@@ -66,3 +69,29 @@ def test_invalid_direct_construction_raises_estimation_error():
         PredictionSettings(k_tau={"RLEG_JOINT3": 1e-4}, k_v={})
     with pytest.raises(EstimationError, match="encoders.order"):
         EstimatorConfig(encoders=FilterSettings(20, 1))
+
+
+
+def test_prediction_reads_k_tau_and_k_v_from_the_motor_file(tmp_path):
+    """[prediction] takes k_tau, k_v of the listed joints from a motor file of config/motors/, the same numbers."""
+    from servotau.actuator import MotorParameters
+    from servotau.config import CONFIG_DIR
+    from servotau.errors import ConfigError
+
+    def cfg(name, text):
+        (tmp_path / name).write_text(text)
+        return EstimatorConfig.from_toml(tmp_path / name)
+
+    example = MotorParameters.load_toml(CONFIG_DIR / "motors" / "example.toml")
+    pred = cfg("one.toml", '[prediction]\nmotors = "motors/example.toml"\njoints = ["RLEG_JOINT3"]\n').prediction
+    assert pred.k_tau == {"RLEG_JOINT3": 5.1e-5} and pred.k_v == {"RLEG_JOINT3": 6.561e-3}
+    assert pred.k_tau["RLEG_JOINT3"] == example["RLEG_JOINT3"].k_tau
+    every = cfg("all.toml", '[prediction]\nmotors = "motors/example.toml"\n').prediction
+    assert set(every.k_tau) == set(example) and every.velocity_window == 20
+    with pytest.raises(ConfigError, match="joints"):
+        cfg("bad.toml", '[prediction]\nmotors = "motors/example.toml"\njoints = ["LARM_JOINT0"]\n')
+    with pytest.raises(ConfigError, match="prediction.motors"):
+        cfg("none.toml", '[prediction]\nmotors = "motors/none.toml"\n')
+    with pytest.raises(ConfigError, match="k_tau"):  # the motor parameters live only in config/motors/
+        cfg("copy.toml", "[prediction.k_tau]\nRLEG_JOINT3 = 5e-5\n")
+    assert not EstimatorConfig.from_toml().prediction.enabled

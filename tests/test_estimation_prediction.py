@@ -6,7 +6,7 @@ import pytest
 from servotau.errors import EstimationError
 from servotau.estimation.config import PredictionSettings
 from servotau.estimation.prediction import ModelPredictor
-from servotau.estimation.savgol import delay
+from servotau.signal.savgol import delay
 
 DT = 1e-3  # [s]
 K_TAU = np.array([1e-4, 2e-4])  # [rad/(N m)]

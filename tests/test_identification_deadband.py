@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
+from servotau.actuator import EffectTerm, MotorModel
 from servotau.control.config import JointGains
 from servotau.control.torque import JointTorqueController
 from servotau.errors import IdentificationError
 from servotau.identification.deadband import BAND, rest_dead_band, with_dead_band
-from servotau.identification.motor_params import EffectTerm, MotorModel
 
 K_TAU = 2e-4  # [rad/(N m)]
 

@@ -173,7 +173,7 @@ def test_a_coefficient_outside_the_physical_range_is_not_chosen():
 
 def _heat(dq, tau, tau_th=10.0):
     """The thermal_drift term's heat proxy of the synthetic servo error ``u`` (the base model without noise)."""
-    from servotau.identification.workbench.signals import lowpass
+    from servotau.actuator.signals import lowpass
 
     u = K_TAU * tau + K_V * dq + K_C * np.tanh(dq / 0.005)
     return lowpass((u / 1e-3) ** 2, tau_th, 1e-3, y0=0.0)
@@ -205,9 +205,9 @@ def _with_lead_share(share: float):
     """The synthetic log where, above the 90 % quantile of the motor-torque proxy (a shape of the saturation grid),
     the error keeps ``share`` of the command's lead since the onset: ``y = y_base + share (lead(t) - lead(t_on))``
     with ``lead = q_des(t - 1) - q(t)``, computed tick by tick (the term reads the error it adds to)."""
+    from servotau.actuator.effects.saturation import motor_torque_proxy
+    from servotau.actuator.signals import hysteresis, run_onsets
     from servotau.identification.workbench import get_effect
-    from servotau.identification.workbench.library import motor_torque_proxy
-    from servotau.identification.workbench.signals import hysteresis, run_onsets
 
     base = synthetic_table(noise=0.0)
     s = load_dataset(base).signals

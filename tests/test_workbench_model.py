@@ -1,10 +1,11 @@
 """Tests of the workbench model, the motor-parameter file with extra terms and the on-line evaluation
-(identification/workbench/model.py, online.py, effects.py; MotorModel.predict/online)."""
+(identification/workbench/model.py; actuator/online.py, registry.py; MotorModel.predict/online)."""
 
 import numpy as np
 import pytest
 from test_workbench_diagnose import synthetic_table
 
+from servotau.actuator import ONLINE_SIGNALS, OnlineModel
 from servotau.errors import IdentificationError
 from servotau.identification import EffectTerm, MotorModel, MotorParameters
 from servotau.identification.workbench import (
@@ -19,7 +20,6 @@ from servotau.identification.workbench import (
     register_effect,
 )
 from servotau.identification.workbench.ladder import add_effects, save_model
-from servotau.identification.workbench.online import ONLINE_SIGNALS, OnlineModel
 
 LIBRARY = ("coulomb", "coulomb_asym", "stribeck", "stiction", "deadzone", "direction_gain", "backlash",
            "load_friction", "cogging", "thermal_drift", "saturation", "elastic", "motor_lag", "delay")
@@ -96,28 +96,6 @@ def test_online_command_solves_for_the_delayed_command():
         OnlineModel(m, 1e-3).step(1.0, 0.1)
 
 
-def test_saturation_holds_the_limit_with_hysteresis_and_integrates_the_command_lead():
-    """The limit detector is the recursion s[k] = x[k] > (off if s[k-1] else on); the term is the change of
-    q_des(t - 1) - q(t) since the onset of each saturated run, zero at the onset and below the limit."""
-    from servotau.identification.workbench.library import saturation
-    from servotau.identification.workbench.signals import Signals, hysteresis
-
-    x = np.array([0.0, 5.0, 11.0, 9.0, 7.0, 12.0, 3.0, 9.5, 10.5, 8.5])
-    s, expected = False, []
-    for v in x:
-        s = v > (8.0 if s else 10.0)
-        expected.append(s)
-    np.testing.assert_array_equal(hysteresis(x, 10.0, 8.0), expected)
-    q = np.zeros(len(x))
-    q_des = np.arange(len(x)) * 1e-3  # [rad] the command runs ahead, 1 mrad per tick
-    sig = Signals({"tau": x, "dq": np.zeros(len(x)), "q": q, "q_des": q_des}, 1e-3, len(x))
-    phi = saturation(sig, tau_sat=10.0, beta=0.0, release=0.8)
-    # saturated at 2-3, 5 and 8-9 (onsets 2, 5, 8): lead(t) - lead(onset), lead = q_des[k-1] - q[k]
-    np.testing.assert_allclose(phi, [0, 0, 0, 1e-3, 0, 0, 0, 0, 0, 1e-3], atol=1e-15)
-    with pytest.raises(IdentificationError, match="off"):
-        hysteresis(x, 8.0, 10.0)
-
-
 def test_online_saturation_term_does_not_read_this_ticks_command():
     """Past the limit the command does not set the torque: the on-line term reads the previous commands
     only, so command() solves for q_des without dividing by a slope near zero."""
@@ -134,32 +112,10 @@ def test_online_saturation_term_does_not_read_this_ticks_command():
 CROSSING = {"band": 3e-4, "damping_share": 0.0, "crossing": 1.0, "width": 2e-3}
 
 
-def test_deadzone_crossing_form_follows_the_command_lead_inside_the_band():
-    """Crossing form: sign(m) outside the band; inside, the sign of the last effort outside plus the command's
-    lead since the entry over the width (the joint crosses the band freely from the edge it entered at); it
-    enters at |m| <= band and leaves at |m| > 1.5 band."""
-    from servotau.identification.workbench.library import _deadzone_columns, _deadzone_fold, deadzone
-    from servotau.identification.workbench.signals import Signals
-
-    # [rad] band 1 mrad: inside from 2 (|u| <= 1 mrad) to 4 (hysteresis: 1.2 mrad is not beyond 1.5 band), and 6-7
-    u = np.array([2.0, 1.5, 0.5, -1.2, 0.2, -2.0, -0.4, 0.3]) * 1e-3
-    n = len(u)
-    q_des = np.arange(n) * 1e-4  # lead = q_des[k-1] - q[k]: 0, 0, 0.1, 0.2, ... mrad
-    sig = Signals({"u": u, "u_v": np.zeros(n), "tau": u, "dq": np.zeros(n), "q": np.zeros(n), "q_des": q_des}, 1e-3, n)
-    phi = deadzone(sig, band=1e-3, crossing=1.0, width=2e-3)
-    np.testing.assert_allclose(phi, [1, 1, 1, 1.05, 1.1, -1, -1, -0.95], atol=1e-12)
-    # fitted as two columns (edge, lead since the entry): width = c_edge / c_lead reproduces their sum
-    cols = _deadzone_columns(sig, band=1e-3, crossing=1.0)
-    c, shape = _deadzone_fold(np.array([3e-3, 1.5]), {"band": 1e-3, "crossing": 1.0})
-    assert shape["width"] == pytest.approx(2e-3)
-    np.testing.assert_allclose(c * deadzone(sig, **shape), cols @ [3e-3, 1.5], atol=1e-15)
-    assert _deadzone_fold(np.array([3e-3]), {"band": 1e-3, "v_th": 0.0}) == (3e-3, {"band": 1e-3, "v_th": 0.0})
-
-
 def test_deadzone_crossing_form_reads_the_command_online_and_offline():
     """Only the crossing form needs q and q_des (named when missing); on-line it equals the batch evaluation
     and does not read this tick's command, so command() needs no division."""
-    from servotau.identification.workbench.online import required_signals
+    from servotau.actuator import required_signals
 
     c, _ = signals(1.0)
     legacy, crossing = model_with("deadzone"), MotorModel(k_tau=5e-5, k_v=6e-3, k_c=1e-4, provenance="test",

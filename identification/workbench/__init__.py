@@ -5,16 +5,26 @@ Plotting (:mod:`.report`) is imported only when used. The command line, its Reru
 logs are applications (:mod:`servotau.apps.model`, :mod:`servotau.apps.model_rerun`, :mod:`servotau.apps.simlog`).
 """
 
-from . import library as _library  # noqa: F401  (registers the built-in effects)
+from servotau.actuator import (
+    ONLINE_SIGNALS,
+    Effect,
+    Excitation,
+    OnlineModel,
+    OnlineTerm,
+    Signals,
+    effect_names,
+    excitation_report,
+    get_effect,
+    predict_batch,
+    register_effect,
+    unregister_effect,
+)
+
 from .data import Dataset, align_torque, load_dataset, write_table
 from .diagnose import MIN_GAIN, Candidate, Confusion, Diagnosis, diagnose
-from .effects import Effect, OnlineTerm, effect_names, get_effect, register_effect, unregister_effect
 from .evaluate import Comparison, Metrics, blocked_folds, compare, folds_of
-from .excitation import Excitation, excitation_report
 from .ladder import Ladder, Rung, add_effects, save_model
 from .model import FittedModel, ModelSpec, Term, fit_spec, parse_spec, resolve_shapes
-from .online import ONLINE_SIGNALS, OnlineModel, predict_batch
-from .signals import Signals
 from .views import ResidualViews, residual_views
 
 __all__ = [

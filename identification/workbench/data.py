@@ -33,9 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from servotau.actuator.signals import Signals
 from servotau.errors import IdentificationError
-
-from .signals import Signals
 
 log = logging.getLogger(__name__)
 
@@ -341,7 +340,7 @@ def _runs(valid: np.ndarray, t: np.ndarray | None, dt: float | None) -> list[tup
 def _differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window_s: float) -> np.ndarray:
     """Centred SG derivative of ``x`` on each run (order ``deriv + 1``, at least 2); runs shorter than the
     window use a shorter window."""
-    from servotau.estimation.savgol import savgol_centred
+    from servotau.signal.savgol import savgol_centred
 
     out = np.zeros_like(x)
     w = _window(window_s, dt)

@@ -27,7 +27,7 @@ Verdict:
   servo effort (the model fails at a current limit).
 - ``no_missing_effect``: neither.
 
-Effects that the data cannot test (see :mod:`~servotau.identification.workbench.excitation`) are
+Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
 ranked but never named: they are reported as untestable, not as absent.
 """
 
@@ -40,16 +40,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from servotau.actuator import EXPERIMENTS, Effect, Excitation, Loss, excitation_report, get_effect, resolve_effects
+from servotau.actuator.signals import delayed, ticks
 from servotau.errors import IdentificationError
 
-from ..loss import Loss
 from .data import SMOOTH_TAU_S, Dataset
-from .effects import Effect, get_effect, resolve_effects
 from .evaluate import Comparison, Fold, compare, error_of, folds_of
-from .excitation import Excitation, excitation_report
-from .library import EXPERIMENTS
 from .model import FittedModel, ModelSpec, Term, design, fit_spec, resolve_shapes, solve
-from .signals import delayed, ticks
 
 log = logging.getLogger(__name__)
 

@@ -14,9 +14,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from servotau.actuator.loss import Loss
 from servotau.errors import IdentificationError
 
-from ..loss import Loss
 from ..metrics import overestimation_rate, signed_excess
 from .data import Dataset
 from .model import FittedModel, ModelSpec, fit_spec, resolve_shapes

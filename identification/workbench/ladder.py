@@ -15,13 +15,11 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from servotau.actuator import FitMetrics, Loss, MotorModel, MotorParameters, get_effect
 from servotau.errors import IdentificationError
 
-from ..loss import Loss
-from ..motor_params import FitMetrics, MotorModel, MotorParameters
 from .data import Dataset
 from .diagnose import MIN_GAIN, Diagnosis, _r, diagnose
-from .effects import get_effect
 from .evaluate import Comparison, Fold, compare, folds_of
 from .model import FittedModel, ModelSpec, Term, resolve_shapes
 

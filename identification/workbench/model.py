@@ -16,16 +16,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from servotau.actuator import EffectTerm, FitMetrics, Loss, ModelTerms, MotorModel, Signals, get_effect
+from servotau.actuator.terms import K_TAU, K_V
 from servotau.errors import IdentificationError
 
 from ..asymmetric import asymmetric_cost
 from ..fit import fit_with_loss
-from ..loss import Loss
-from ..motor_params import EffectTerm, FitMetrics, MotorModel
-from ..regressors import K_TAU, K_V, Regressors
+from ..regressors import Regressors
 from ..validation import MAX_CONDITION, MIN_SAMPLES_PER_PARAMETER, check_min_samples
-from .effects import get_effect
-from .signals import Signals
 
 FIXED_POINT = 4
 LINEAR_SIGNAL = {K_TAU: "tau", K_V: "dq"}
@@ -116,31 +114,19 @@ class FittedModel:
         """The model's servo error without the terms that read it [rad] (see :meth:`context`)."""
         return self.context(signals)["u"]
 
+    def terms(self) -> ModelTerms:
+        """The model as the actuator's evaluator reads it."""
+        return ModelTerms(self.spec.linear, tuple((t.effect, t.shape) for t in self.spec.terms), self.coefficients)
+
     def context(self, signals: Signals) -> dict[str, np.ndarray]:
         """The model-dependent signals [rad] that some regressors read: ``u_tau = k_tau tau``,
         ``u_v = k_v dq`` and ``u``, the model's prediction without the terms that read ``u`` (the paper's
         ``k_tau tau + k_v dq`` plus friction-like terms: the position error the servo works with)."""
-        c = self.coefficients
-        zero = np.zeros(signals.n)
-        u_tau = c[K_TAU] * signals["tau"] if K_TAU in self.spec.linear else zero
-        u_v = c[K_V] * signals["dq"] if K_V in self.spec.linear else zero
-        u = u_tau + u_v
-        for t in self.spec.terms:
-            eff = get_effect(t.effect)
-            if not eff.uses_model:
-                u = u + c[t.effect] * eff.evaluate(signals, t.shape)
-        return {"u": u, "u_tau": u_tau, "u_v": u_v}
+        return self.terms().context(signals)
 
     def predict(self, signals: Signals) -> np.ndarray:
         """Model output [rad] on ``signals``."""
-        ctx = self.context(signals)
-        su = signals.with_columns(**ctx)
-        out = ctx["u"].copy()
-        for t in self.spec.terms:
-            eff = get_effect(t.effect)
-            if eff.uses_model:
-                out += self.coefficients[t.effect] * eff.evaluate(su, t.shape)
-        return out
+        return self.terms().predict(signals)
 
     def describe(self) -> list[str]:
         lines = [f"{k} = {self.coefficients[k]:.6g}" for k in self.spec.linear]
@@ -174,16 +160,8 @@ class FittedModel:
     @classmethod
     def from_motor_model(cls, m: MotorModel) -> FittedModel:
         """The workbench form of a motor-parameter entry (``k_c`` is the ``coulomb`` term, plain sign)."""
-        terms, coefs = [], {K_TAU: m.k_tau, K_V: m.k_v}
-        if m.k_c is not None and "coulomb" in m.extra:
-            raise IdentificationError("k_c and an extra term 'coulomb' are both set: expected one Coulomb term")
-        if m.k_c is not None:
-            terms.append(Term("coulomb", {"v_eps": 0.0}))
-            coefs["coulomb"] = m.k_c
-        for name, term in m.extra.items():
-            terms.append(Term(name, dict(term.shape)))
-            coefs[name] = term.coefficient
-        return cls(ModelSpec((K_TAU, K_V), tuple(terms)), coefs, m.loss)
+        mt = m.terms()
+        return cls(ModelSpec(mt.linear, tuple(Term(name, shape) for name, shape in mt.terms)), mt.coefficients, m.loss)
 
 
 def design(signals: Signals, spec: ModelSpec, ctx: Mapping[str, np.ndarray] | None, cache: dict | None = None) -> tuple[

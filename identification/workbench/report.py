@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from servotau.actuator import excitation_report
+
 from .data import Dataset, describe
 from .diagnose import Diagnosis
 from .evaluate import Comparison, Metrics
-from .excitation import excitation_report
 from .ladder import Ladder
 from .views import ResidualViews, residual_views
 

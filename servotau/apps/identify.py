@@ -122,7 +122,7 @@ def collect_main(args) -> int:
 def fit_main(args) -> int:
     from dataclasses import replace
 
-    from servotau.identification.loss import Loss
+    from servotau.actuator.loss import Loss
     from servotau.identification.pipeline import fit_log, write_motor_file
     from servotau.identification.plan import load_plan, parse_joints
 

@@ -19,12 +19,10 @@ import sys
 import time
 from pathlib import Path
 
+from servotau.actuator import Loss, effect_names
 from servotau.errors import IdentificationError
-from servotau.identification.loss import Loss
-from servotau.identification.workbench import library as _library  # noqa: F401  (registers the built-in effects)
 from servotau.identification.workbench.data import OFFLINE_ESTIMATE, ROLES, align_torque, describe, load_dataset
 from servotau.identification.workbench.diagnose import MIN_GAIN, diagnose
-from servotau.identification.workbench.effects import effect_names
 from servotau.identification.workbench.evaluate import DEFAULT_FOLDS, compare, folds_of
 from servotau.identification.workbench.ladder import add_effects, save_model
 from servotau.identification.workbench.model import FittedModel, parse_spec
@@ -152,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     comparison = diagnosis = ladder = None
     if args.model_command == "compare":
         if args.model:
-            from servotau.identification.motor_params import MotorParameters
+            from servotau.actuator import MotorParameters
 
             params = MotorParameters.load_toml(args.model)
             joint = ds.joint or (next(iter(params)) if len(params) == 1 else None)

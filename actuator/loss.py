@@ -1,14 +1,27 @@
-"""The loss minimised by a fit: plain least squares (eq. 7) or the asymmetric penalty (eq. 8)."""
+"""The loss a motor model was fitted with: plain least squares (paper eq. 7) or the asymmetric penalty (eq. 8).
+
+The motor file records it (``loss``, ``w``); the identification minimises it.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from servotau.errors import IdentificationError
 
-from .validation import check_weight
-
 LOSS_KINDS = ("least_squares", "asymmetric")
+
+
+def check_weight(w: object) -> float:
+    """Return the asymmetric weight ``w`` as a float, or raise unless it is a finite number > 1."""
+    if isinstance(w, bool) or not isinstance(w, (int, float, np.floating, np.integer)) or not math.isfinite(w):
+        raise IdentificationError(f"w = {w!r}: expected a finite number > 1 (over-estimation weight)")
+    if w <= 1.0:
+        raise IdentificationError(f"w = {w!r}: expected a finite number > 1 (over-estimation weight)")
+    return float(w)
 
 
 @dataclass(frozen=True)

@@ -1,11 +1,11 @@
-"""Named physical effects: regressors of the actuator model with a grid of shape parameters.
+"""The effect registry: named physical effects, regressors of the actuator model with a grid of shapes.
 
 An :class:`Effect` adds ``coefficient * phi(signals; shape)`` [rad] to the model
-``dq_err = k_tau tau + k_v dq + ...``. The registry maps names to effects; the library of built-in
-effects (:mod:`~servotau.identification.workbench.library`) fills it at import, and users add their
-own without editing it::
+``dq_err = k_tau tau + k_v dq + ...``. The built-in effects are the modules of
+:mod:`servotau.actuator.effects`, one file per effect, found on first use of the registry (in the order of
+their ``ORDER``); users add their own without editing it::
 
-    from servotau.identification.workbench import register_effect
+    from servotau.actuator import register_effect
 
     register_effect(
         "cubic_torque",
@@ -18,8 +18,10 @@ own without editing it::
 
 from __future__ import annotations
 
+import importlib
 import math
-from collections.abc import Callable, Iterable, Mapping
+import pkgutil
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -55,8 +57,8 @@ class Effect:
         regressor: ``phi(signals, **shape) -> (n,)`` array [unit of the term / coefficient].
         grid: Shapes tried by the diagnosis (each a mapping of shape parameters), or a function of the
             :class:`Signals` giving them (e.g. thresholds at quantiles of the data).
-        signals: Signals the regressor reads (see :mod:`~servotau.identification.workbench.signals`);
-            on-line evaluation needs the same.
+        signals: Signals the regressor reads (see :mod:`~servotau.actuator.signals`); on-line evaluation
+            needs the same.
         signature: How the missing effect shows in the residuals (documentation, reports).
         family: The non-parametric probe it is compared with (one of :data:`FAMILIES`).
         description: One line of physics.
@@ -75,6 +77,14 @@ class Effect:
         shape_signals: ``shape_signals(shape) -> names``: signals that some shapes read besides ``signals``
             (e.g. the crossing form of ``deadzone`` reads ``q`` and ``q_des``); a grid function should offer
             such shapes only when the signals are there.
+        scalar: ``scalar(sample, **shape) -> float``: ``regressor`` on one sample (a mapping of floats), for
+            the on-line evaluation of an effect without memory; None: the regressor on one-sample arrays.
+        online_signals: What a controller must provide on-line for this effect, on top of ``tau`` and ``dq``
+            (documentation, error messages).
+        signal_substitutes: Signals another one stands for: ``{"q": "ddq"}``: the regressor filters ``q``
+            into an acceleration only when no acceleration is given (on-line: the estimator's ``ddq``).
+        experiments: The experiment that tells this effect from a look-alike, by the look-alike's name (each
+            pair is written in one of its two effects' files; see :func:`experiments`).
     """
 
     name: str
@@ -92,6 +102,10 @@ class Effect:
     confusable: tuple[str, ...] = ()
     coefficient_range: tuple[float, float] | None = None
     shape_signals: Callable[[Mapping[str, float]], Iterable[str]] | None = None
+    scalar: Callable[..., float] | None = None
+    online_signals: str = ""
+    signal_substitutes: Mapping[str, str] = field(default_factory=dict)
+    experiments: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() or self.name in RESERVED:
@@ -104,6 +118,8 @@ class Effect:
             object.__setattr__(self, "grid", _check_grid(self.name, self.grid))
         object.__setattr__(self, "signals", tuple(self.signals))
         object.__setattr__(self, "confusable", tuple(self.confusable))
+        object.__setattr__(self, "signal_substitutes", dict(self.signal_substitutes))
+        object.__setattr__(self, "experiments", dict(self.experiments))
         if self.family not in FAMILIES:
             raise IdentificationError(f"effect '{self.name}': family {self.family!r}: expected one of {FAMILIES}")
         if (self.fit_columns is None) != (self.fold is None):
@@ -200,9 +216,55 @@ def _column(effect: Effect, fn: Regressor, signals: Signals, shape: Mapping[str,
 @dataclass
 class _Registry:
     effects: dict[str, Effect] = field(default_factory=dict)
+    builtin: tuple[Effect, ...] | None = None  # None until the effect files are loaded
 
 
 _REGISTRY = _Registry()
+EFFECTS_PACKAGE = __name__.rsplit(".", 1)[0] + ".effects"
+
+
+def _discover() -> tuple[Effect, ...]:
+    """The effects of the files of :mod:`servotau.actuator.effects`, ordered by their ``ORDER``.
+
+    Each module ``<name>.py`` (not starting with ``_``) defines ``EFFECT``, an :class:`Effect` named
+    ``<name>``, and ``ORDER``, its place in the library (rankings keep this order on ties).
+    """
+    package = importlib.import_module(EFFECTS_PACKAGE)
+    found = []
+    for info in pkgutil.iter_modules(package.__path__):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{EFFECTS_PACKAGE}.{info.name}")
+        effect, order = getattr(module, "EFFECT", None), getattr(module, "ORDER", None)
+        if not isinstance(effect, Effect) or effect.name != info.name:
+            raise IdentificationError(f"{module.__file__}: EFFECT = {effect!r}: expected an Effect named '{info.name}'")
+        if isinstance(order, bool) or not isinstance(order, int):
+            raise IdentificationError(f"{module.__file__}: ORDER = {order!r}: expected an int (the library order)")
+        found.append((order, effect))
+    orders = [o for o, _ in found]
+    if len(set(orders)) != len(orders):
+        raise IdentificationError(f"effect files of {EFFECTS_PACKAGE}: ORDER = {sorted(orders)}: expected distinct")
+    return tuple(e for _, e in sorted(found, key=lambda oe: oe[0]))
+
+
+def _effects() -> dict[str, Effect]:
+    """The registry, the built-in effects loaded first (on first use)."""
+    if _REGISTRY.builtin is None:
+        _REGISTRY.builtin = ()  # a file that uses the registry while it is loaded sees it empty, not a recursion
+        try:
+            builtin = _discover()
+        except BaseException:
+            _REGISTRY.builtin = None
+            raise
+        _REGISTRY.builtin = builtin
+        _REGISTRY.effects = {**{e.name: e for e in builtin}, **_REGISTRY.effects}
+    return _REGISTRY.effects
+
+
+def builtin_effects() -> tuple[Effect, ...]:
+    """The built-in effects (one file each in :mod:`servotau.actuator.effects`), in library order."""
+    _effects()
+    return _REGISTRY.builtin
 
 
 def register_effect(
@@ -227,32 +289,74 @@ def register_effect(
         effect = Effect(name=effect, regressor=regressor, **fields)
     elif regressor is not None or fields:
         raise IdentificationError("register_effect(Effect(...)): expected no other arguments")
-    if effect.name in _REGISTRY.effects and not replace:
+    effects = _effects()
+    if effect.name in effects and not replace:
         raise IdentificationError(f"effect '{effect.name}' is already registered: pass replace=True to redefine it")
-    _REGISTRY.effects[effect.name] = effect
+    effects[effect.name] = effect
     return effect
 
 
 def unregister_effect(name: str) -> None:
     """Remove a user effect (built-in effects can be removed too, e.g. in tests)."""
     get_effect(name)
-    del _REGISTRY.effects[name]
+    del _effects()[name]
 
 
 def get_effect(name: str) -> Effect:
     """The registered effect ``name``, or raise listing the known names."""
-    if name not in _REGISTRY.effects:
+    effects = _effects()
+    if name not in effects:
         raise IdentificationError(f"unknown effect '{name}': expected one of {effect_names()}")
-    return _REGISTRY.effects[name]
+    return effects[name]
 
 
 def effect_names() -> list[str]:
     """Registered effect names, built-in ones first in library order."""
-    return list(_REGISTRY.effects)
+    return list(_effects())
 
 
 def resolve_effects(names: Iterable[str] | None) -> list[Effect]:
     """Effects by name (all registered ones for None), each name checked."""
     if names is None:
-        return list(_REGISTRY.effects.values())
+        return list(_effects().values())
     return [get_effect(n) for n in names]
+
+
+class _View(Mapping):
+    """A read-only mapping computed from the registry at each access (it follows registrations)."""
+
+    def __init__(self, build: Callable[[], dict]):
+        self._build = build
+
+    def __getitem__(self, key):
+        return self._build()[key]
+
+    def __iter__(self) -> Iterator:
+        return iter(self._build())
+
+    def __len__(self) -> int:
+        return len(self._build())
+
+    def __repr__(self) -> str:
+        return repr(self._build())
+
+
+def _experiments() -> dict[frozenset[str], str]:
+    out: dict[frozenset[str], str] = {}
+    for effect in _effects().values():
+        for other, text in effect.experiments.items():
+            key = frozenset((effect.name, other))
+            if out.get(key, text) != text:
+                raise IdentificationError(f"effects '{effect.name}' and '{other}': two different experiments: "
+                                          "expected the pair's experiment in one of the two effect files")
+            out[key] = text
+    return out
+
+
+EXPERIMENTS: Mapping[frozenset[str], str] = _View(_experiments)
+"""The experiment that separates two look-alike effects, by the pair ``frozenset((a, b))``."""
+
+ONLINE_SIGNALS: Mapping[str, str] = _View(
+    lambda: {e.name: e.online_signals for e in _effects().values() if e.online_signals}
+)
+"""What the controller must provide on-line for each effect, on top of the paper's ``tau`` and ``dq``."""

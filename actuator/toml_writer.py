@@ -1,4 +1,4 @@
-"""Just enough TOML writing for the motor-parameter file (tomllib reads; the stdlib does not write).
+"""Just enough TOML writing for the motor file (:mod:`.motor_file`; tomllib reads, the stdlib does not write).
 
 Values: finite floats (``repr`` round-trips exactly), ints, bools, strings and inline tables of those.
 """

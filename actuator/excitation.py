@@ -1,5 +1,5 @@
 """Excitation report: what the data exercised, so that an effect the data never excited is reported as
-untestable, not as absent.
+untestable, not as absent; and the requirements several effects share (each effect's ``needs`` in its file).
 """
 
 from __future__ import annotations
@@ -136,3 +136,23 @@ def _count_rest_reversals(tau: np.ndarray, hold: np.ndarray, threshold: float) -
     for a, b in zip(edges[::2], edges[1::2], strict=True):
         count += _reversals(tau[a:b], threshold)
     return count
+
+
+# -- requirements shared by several effects: a reason string when the data cannot test the effect ------
+def both_directions(e: Excitation) -> str | None:
+    """Motion in both directions (at least two velocity reversals)."""
+    if e.velocity_reversals < 2:
+        return f"only {e.velocity_reversals} velocity reversals: expected motion in both directions (>= 2)"
+    return None
+
+
+def has_torque(e: Excitation) -> str | None:
+    """A torque column."""
+    return "no torque column" if e.torque_range is None else None
+
+
+def fast_motion(e: Excitation) -> str | None:
+    """At least 0.5 s of fast motion (the dynamics effects)."""
+    if e.fast_time < 0.5:
+        return f"fast motion {e.fast_time:.1f} s: expected >= 0.5 s faster than 0.3 rad/s (dynamics)"
+    return None

@@ -1,9 +1,9 @@
-"""Tests of servotau.identification.loss."""
+"""Tests of servotau.actuator.loss."""
 
 import pytest
 
+from servotau.actuator import Loss
 from servotau.errors import IdentificationError
-from servotau.identification import Loss
 
 
 def test_loss_validation():

@@ -1,18 +1,19 @@
-"""Evaluate a :class:`~servotau.identification.motor_params.MotorModel` with extra terms, off-line on arrays
-or on-line one control tick at a time (for the feedforward of control/).
+"""Evaluate a :class:`~servotau.actuator.model.MotorModel` with extra terms, off-line on arrays or on-line one
+control tick at a time (for the feedforward of control/).
 
-Signals each effect needs on-line (``ONLINE_SIGNALS``): the controller gives ``tau`` [N m] (desired or
-estimated torque), ``dq`` [rad/s], ``q`` [rad], ``q_des`` [rad] (the command of this tick), ``t`` [s] and,
-for ``elastic`` and ``backlash``, the estimator's ``ddq`` [rad/s^2] (off-line the workbench filters ``q``
-with the term's ``window``; given ``ddq``, :func:`predict_batch` uses it instead, as on-line). Effects
-with memory (``stiction``, ``thermal_drift``, ``motor_lag``, ``delay``, ``saturation``, ``deadzone`` with a latch
-or in its crossing form, and ``elastic`` and ``backlash`` with a ``lag``) keep their state in the
-:class:`OnlineModel`; call :meth:`OnlineModel.step` exactly once per tick.
+The signals each effect needs on-line are its ``online_signals`` (:data:`ONLINE_SIGNALS`): the controller gives
+``tau`` [N m] (desired or estimated torque), ``dq`` [rad/s], ``q`` [rad], ``q_des`` [rad] (the command of this
+tick), ``t`` [s] and, for the effects whose ``signal_substitutes`` map ``q`` to ``ddq`` (``elastic``,
+``backlash``), the estimator's ``ddq`` [rad/s^2] (off-line the workbench filters ``q`` with the term's
+``window``; given ``ddq``, :func:`predict_batch` uses it instead, as on-line). Effects with memory (an
+``online`` state class) keep their state in the :class:`OnlineModel`; call :meth:`OnlineModel.step` exactly
+once per tick.
 
-``delay`` reads the command of the current tick: the model is then affine in ``q_des``, and
-:meth:`OnlineModel.command` solves ``q_des = q + model(q_des)`` for the feedforward. ``saturation`` reads
-the commands of the previous ticks only (past the limit the command does not set the torque): its
-term does not change with this tick's command; nor does ``deadzone``'s crossing form.
+An effect that reads the command of the current tick (``delay``) makes the model affine in ``q_des``:
+:meth:`OnlineModel.command` solves ``q_des = q + model(q_des)`` for the feedforward.
+
+The model is anything with ``k_tau``, ``k_v``, ``extra`` (effect terms with ``shape``) and ``terms()`` (a
+:class:`~servotau.actuator.terms.ModelTerms`): a :class:`~servotau.actuator.model.MotorModel`.
 """
 
 from __future__ import annotations
@@ -24,52 +25,33 @@ import numpy as np
 
 from servotau.errors import IdentificationError
 
-from ..motor_params import MotorModel
-from .effects import get_effect
-from .library import BUILTIN, SCALAR
-from .model import FittedModel
+from .registry import ONLINE_SIGNALS, get_effect
 from .signals import Signals
+from .terms import K_TAU, K_V
 
 BASE_SIGNALS = ("tau", "dq")
-BUILTIN_BY_NAME = {e.name: e for e in BUILTIN}
+MODEL_SIGNALS = ("u", "u_tau", "u_v")  # computed from the model, not given
+
+__all__ = ["BASE_SIGNALS", "ONLINE_SIGNALS", "OnlineModel", "checked_online_model", "predict_batch",
+           "required_signals"]
 
 
-def required_signals(model: MotorModel) -> list[str]:
+def required_signals(model) -> list[str]:
     """Signals (besides ``tau`` and ``dq``) that evaluating ``model`` needs."""
     out: list[str] = []
     for name, term in model.extra.items():
         eff = get_effect(name)
         for s in eff.signals_of(term.shape):
-            s = "ddq" if (s == "q" and name in ("elastic", "backlash")) else s
-            if s not in (*BASE_SIGNALS, "u", "u_tau", "u_v") and s not in out:
+            s = eff.signal_substitutes.get(s, s)
+            if s not in (*BASE_SIGNALS, *MODEL_SIGNALS) and s not in out:
                 out.append(s)
         if eff.history and "t" not in out:
             out.append("t")
     return out
 
 
-ONLINE_SIGNALS = {
-    "coulomb": "dq",
-    "coulomb_asym": "dq",
-    "stribeck": "dq",
-    "stiction": "dq (history: a latch of the last direction)",
-    "deadzone": "tau, dq (history if v_th > 0: a latch of the sign of the last effort beyond the band); in the "
-    "crossing form also q, q_des (history: the latch, the last command and the lead at the entry into the band)",
-    "direction_gain": "tau, dq",
-    "load_friction": "tau, dq",
-    "backlash": "tau, ddq (the estimator's acceleration; history: the last `lag` seconds of it)",
-    "cogging": "q",
-    "thermal_drift": "tau, dq (history: a first-order lag of the servo effort)",
-    "saturation": "tau, dq, q, q_des (history: the limit detector's state, the last command, the lead at the onset)",
-    "elastic": "ddq (the estimator's acceleration; history: the last `lag` seconds of it)",
-    "motor_lag": "tau, dq (history: a first-order lag)",
-    "delay": "q_des (history: the commands of the last `delay` seconds, and this tick's)",
-}
-"""What the controller must provide for each built-in effect, on top of the paper's ``tau`` and ``dq``."""
-
-
 def predict_batch(
-    model: MotorModel,
+    model,
     tau: np.ndarray,
     dq: np.ndarray,
     *,
@@ -98,33 +80,31 @@ def predict_batch(
     if period is None and "t" in cols and n > 1:
         period = float(np.median(np.diff(cols["t"])))
     _check_signals(model, cols, period)
-    return FittedModel.from_motor_model(model).predict(Signals(cols, period, n))
+    return model.terms().predict(Signals(cols, period, n))
 
 
-def _check_signals(model: MotorModel, cols: Mapping[str, object], period: float | None) -> None:
+def _check_signals(model, cols: Mapping[str, object], period: float | None) -> None:
     for name, term in model.extra.items():
         eff = get_effect(name)
-        need = [s for s in eff.signals_of(term.shape) if s not in ("u", "u_tau", "u_v")]
-        if name in ("elastic", "backlash") and "q" not in cols:
-            need = [s if s != "q" else "ddq" for s in need]
+        need = [s for s in eff.signals_of(term.shape) if s not in MODEL_SIGNALS]
+        need = [eff.signal_substitutes.get(s, s) if s not in cols else s for s in need]
         missing = [s for s in need if s not in cols]
         if missing:
             raise IdentificationError(
                 f"extra term '{name}' needs signal(s) {missing}: expected them as keyword arguments "
-                f"(on-line: {ONLINE_SIGNALS.get(name, ', '.join(eff.signals))})"
+                f"(on-line: {eff.online_signals or ', '.join(eff.signals)})"
             )
         if eff.history and period is None:
             raise IdentificationError(f"extra term '{name}' has memory: expected the sampling period (or t)")
 
 
 class _Stateless:
-    """An effect without memory, evaluated on the current sample (a scalar formula for built-in effects,
-    else the regressor on one-sample arrays)."""
+    """An effect without memory, evaluated on the current sample (its ``scalar`` formula if it has one, else
+    the regressor on one-sample arrays)."""
 
     def __init__(self, effect, shape: Mapping[str, float], period: float):
         self.effect, self.shape, self.period = effect, dict(shape), period
-        builtin = BUILTIN_BY_NAME.get(effect.name) is effect  # not replaced by a user effect of the same name
-        self._scalar = SCALAR.get(effect.name) if builtin else None
+        self._scalar = effect.scalar
 
     def value(self, x: Mapping[str, float]) -> float:
         if self._scalar is not None:
@@ -144,17 +124,17 @@ class OnlineModel:
         period: Control period [s].
     """
 
-    def __init__(self, model: MotorModel, period: float):
+    def __init__(self, model, period: float):
         if not (isinstance(period, (int, float)) and math.isfinite(period) and period > 0):
             raise IdentificationError(f"period = {period!r}: expected a control period > 0 [s]")
         self.model = model
         self.period = float(period)
-        self._fitted = FittedModel.from_motor_model(model)
+        self._model_terms = model.terms()
         self._terms = []
-        for t in self._fitted.spec.terms:
-            eff = get_effect(t.effect)
-            term = eff.online(t.shape, self.period) if eff.online is not None else _Stateless(eff, t.shape, self.period)
-            self._terms.append((t.effect, eff.uses_model, self._fitted.coefficients[t.effect], term))
+        for name, shape in self._model_terms.terms:
+            eff = get_effect(name)
+            term = eff.online(shape, self.period) if eff.online is not None else _Stateless(eff, shape, self.period)
+            self._terms.append((name, eff.uses_model, self._model_terms.coefficients[name], term))
         self.signals = ("tau", "dq", *required_signals(model))
 
     def _sample(self, tau: float, dq: float, extra: Mapping[str, float]) -> dict[str, float]:
@@ -167,9 +147,9 @@ class OnlineModel:
         missing = [s for s in self.signals if s not in x]
         if missing:
             raise IdentificationError(f"OnlineModel: missing signal(s) {missing}: expected {list(self.signals)}")
-        c = self._fitted.coefficients
-        x["u_tau"] = c["k_tau"] * x["tau"]
-        x["u_v"] = c["k_v"] * x["dq"]
+        c = self._model_terms.coefficients
+        x["u_tau"] = c[K_TAU] * x["tau"]
+        x["u_v"] = c[K_V] * x["dq"]
         x["u"] = x["u_tau"] + x["u_v"]
         return x
 
@@ -211,3 +191,18 @@ class OnlineModel:
             q_des = q + a / (1.0 - slope)
         self.step(tau, dq, q=q, q_des=q_des, **signals)
         return q_des
+
+
+def checked_online_model(model, period: float) -> OnlineModel:
+    """The on-line model of ``model``, checked on one sample of every signal (zeros).
+
+    Raises:
+        IdentificationError: An extra term or its shape parameters cannot be evaluated:
+            ``motor-model extra terms [...]: <why>``.
+    """
+    try:
+        om = OnlineModel(model, period)
+        om.predict(0.0, 0.0, q=0.0, q_des=0.0, t=0.0, ddq=0.0)
+    except (IdentificationError, KeyError, TypeError, ValueError) as err:
+        raise IdentificationError(f"motor-model extra terms {list(model.extra)}: {err}") from err
+    return om

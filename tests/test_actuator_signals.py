@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from servotau.identification.workbench.signals import Signals
+from servotau.actuator.signals import Signals
 
 
 def test_derived_is_computed_once_for_a_signals_and_its_copies_and_again_for_another_source():

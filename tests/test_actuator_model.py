@@ -1,22 +1,14 @@
-"""Tests of servotau.identification.motor_params: the MotorModel and its TOML file."""
+"""Tests of servotau.actuator.model and .motor_file: the MotorModel and its TOML file."""
 
 import math
 
 import numpy as np
 import pytest
 
+from servotau.actuator import EffectTerm, FitMetrics, Loss, MotorModel, MotorParameters
 from servotau.config import CONFIG_DIR
 from servotau.errors import ConfigError, IdentificationError
-from servotau.identification import (
-    EffectTerm,
-    FitMetrics,
-    Loss,
-    MotorModel,
-    MotorParameters,
-    fit_linear_model,
-    fit_two_stage,
-    make_synthetic,
-)
+from servotau.identification import fit_linear_model, fit_two_stage, make_synthetic
 
 GOOD = """version = 1
 [joints.RLEG_JOINT3]
@@ -130,9 +122,9 @@ def test_membership_of_an_unknown_joint_is_false_and_lookup_names_it():
     """`joint in params` answers False for an unknown joint; params[joint] raises naming the known joints."""
     import pytest as _pytest
 
+    from servotau.actuator import MotorParameters
     from servotau.config import CONFIG_DIR
     from servotau.errors import IdentificationError
-    from servotau.identification import MotorParameters
 
     params = MotorParameters.load_toml(CONFIG_DIR / "motors" / "hrp2_sim_identified.toml")
     assert "RLEG_JOINT3" in params and "LARM_JOINT0" not in params

@@ -1,11 +1,11 @@
-"""Tests of servotau.identification.toml_writer."""
+"""Tests of servotau.actuator.toml_writer."""
 
 import math
 import tomllib
 
 import pytest
 
-from servotau.identification import toml_writer as tw
+from servotau.actuator import toml_writer as tw
 
 
 def test_values_round_trip_through_tomllib():

@@ -1,4 +1,5 @@
-"""The signals an effect regressor reads, and the causal filters shared by batch and on-line evaluation.
+"""The signals an effect regressor reads, the causal filters shared by batch and on-line evaluation, and the
+helpers several effects share (smoothed sign, the command's lead, the acceleration, on-line lags and buffers).
 
 An effect is a function of :class:`Signals`, a read-only mapping from signal name to a 1-D array
 (one sample per tick). Standard names:
@@ -10,17 +11,19 @@ An effect is a function of :class:`Signals`, a read-only mapping from signal nam
 
 Filters with memory (delays, first-order lags, the direction latch, the limit detector with hysteresis) are
 written as one-step recursions, evaluated here over a whole array and by
-:mod:`~servotau.identification.workbench.online` one sample at a time, so both give the same numbers.
+:mod:`~servotau.actuator.online` one sample at a time, so both give the same numbers.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator, Mapping
 
 import numpy as np
 from scipy.signal import lfilter
 
 from servotau.errors import IdentificationError
+from servotau.signal.savgol import savgol_centred
 
 STANDARD = ("t", "q", "q_des", "tau", "dq", "ddq", "u")
 
@@ -156,3 +159,100 @@ def hysteresis(x: np.ndarray, on: float, off: float) -> np.ndarray:
     idx = np.arange(len(x))
     last_on = np.maximum.accumulate(np.where(x > on, idx, -1))
     return above_off & (last_on >= run_onsets(above_off)) & (last_on >= 0)
+
+
+# -- helpers shared by several effects -----------------------------------------------------------------
+V_EPS = (0.0, 0.005, 0.01, 0.02, 0.05)  # [rad/s] sign smoothing tried by the grids (0: plain sign)
+INERTIA_LAGS = (0.0, 0.002, 0.005)  # [s] delays of the inertia term tried by the grids (that of the torque estimate)
+
+
+def smooth_sign(x: np.ndarray, v: float) -> np.ndarray:
+    """``tanh(x / v)``, or ``sign(x)`` for ``v <= 0``."""
+    return np.sign(x) if v <= 0.0 else np.tanh(x / v)
+
+
+def smooth_sign_scalar(x: float, v: float) -> float:
+    """:func:`smooth_sign` of one sample."""
+    return (x > 0) - (x < 0) if v <= 0.0 else math.tanh(x / v)
+
+
+def command_lead(s: Signals) -> np.ndarray:
+    """``q_des(t - 1 tick) - q(t)`` [rad]: the error the servo has to close at the start of the tick, up to
+    the previous command (the integral of ``dq_des - dq``; this tick's command is not read)."""
+    return delayed(s["q_des"], 1) - s["q"]
+
+
+def sample_lead(x: Mapping[str, float], q_des_prev: float | None) -> float:
+    """:func:`command_lead` of one sample: the last tick's command (this tick's on the first) minus ``q``."""
+    return (x["q_des"] if q_des_prev is None else q_des_prev) - x["q"]
+
+
+def acceleration(s: Signals, window: float) -> np.ndarray:
+    """The acceleration [rad/s^2]: an estimate given with the data (``ddq_est``: an acceleration column of
+    the log, or the controller's estimator on-line), else the centred SG second derivative of ``q`` over
+    ``window`` [s] (order 3)."""
+    if "ddq_est" in s:
+        return s["ddq_est"]
+    if window <= 0.0:
+        return s["ddq"]
+    dt = s.require_dt("acceleration")
+    w = max(5, int(round(window / dt)) | 1)
+    if w > s.n:
+        return s["ddq"]
+    return s.derived("q", ("ddq", w, dt), lambda q: savgol_centred(q, w, 3, dt, deriv=2))
+
+
+def inertia(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
+    """The acceleration of :func:`acceleration`, delayed by ``lag`` [s] like the torque estimate.
+
+    The servo torque is the link torque plus the rotor's inertia torque ``J ddq``; when the torque column
+    is an estimate that lags the encoders (an estimator's delay), only an equally delayed inertia term
+    completes it into the (smooth) servo torque of that earlier instant. ``lag = 0``: no delay.
+    """
+    a = acceleration(s, window)
+    if lag <= 0.0:
+        return a
+    return delayed(a, ticks(lag, s.require_dt("the lag of the inertia term")))
+
+
+def sample_acceleration(x: Mapping[str, float]) -> float:
+    """The acceleration of one sample: the estimator's (``ddq_est``) if given, else ``ddq``."""
+    return x["ddq_est"] if "ddq_est" in x else x["ddq"]
+
+
+class OnlineLag:
+    """``y += a (x - y)`` on a signal of the sample (on-line :func:`lowpass`); effects say what x is."""
+
+    def __init__(self, time_constant: float, period: float, y0: float | None):
+        self.a = lowpass_gain(time_constant, period)
+        self.y = y0
+
+    def _next(self, x: float) -> float:
+        y = x if self.y is None else self.y  # first sample: y[-1] = x[0] unless y0 was given
+        return y + self.a * (x - y)
+
+
+class OnlineInertia:
+    """On-line :func:`inertia`: the estimator's acceleration, delayed by the shape's ``lag`` (a buffer)."""
+
+    def __init__(self, shape: Mapping[str, float], period: float):
+        lag = shape.get("lag", 0.0)
+        self.n = ticks(lag, period) if lag > 0.0 else 0
+        self.buf: list[float] = []
+
+    def _acc(self, x: Mapping[str, float]) -> float:
+        a = sample_acceleration(x)
+        if self.n == 0:
+            return a
+        if len(self.buf) < self.n:
+            return self.buf[0] if self.buf else a
+        return self.buf[-self.n]
+
+    def value(self, x: Mapping[str, float]) -> float:
+        return self._acc(x)
+
+    def commit(self, x: Mapping[str, float]) -> None:
+        if self.n:
+            self.buf.append(sample_acceleration(x))
+            if len(self.buf) > self.n:
+                del self.buf[0]

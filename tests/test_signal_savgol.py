@@ -1,4 +1,4 @@
-"""Tests of servotau.estimation.savgol."""
+"""Tests of servotau.signal.savgol."""
 
 import math
 import tracemalloc
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from servotau.errors import EstimationError
-from servotau.estimation.savgol import CausalSavgol, causal_coeffs, delay, savgol_centred
+from servotau.signal.savgol import CausalSavgol, causal_coeffs, delay, savgol_centred
 
 DT = 1e-3  # [s]
 

@@ -1,0 +1,59 @@
+"""``cogging``: torque ripple periodic in the joint angle (motor cogging, gear tooth mesh).
+
+``phi = sin(2 pi q / period + phase)``; fitted as a sine and a cosine of unknown phase, folded into one
+coefficient and the ``phase``. On-line: ``q``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..excitation import Excitation
+from ..registry import Effect
+from ..signals import Signals
+
+ORDER = 90
+GRID = tuple({"period": p} for p in np.geomspace(0.01, 0.32, 11).round(4).tolist())  # [rad]
+
+
+def cogging(s: Signals, period: float, phase: float = 0.0) -> np.ndarray:
+    return np.sin(2.0 * math.pi * s["q"] / period + phase)
+
+
+def columns(s: Signals, period: float) -> np.ndarray:
+    x = 2.0 * math.pi * s["q"] / period
+    return np.column_stack([np.sin(x), np.cos(x)])
+
+
+def fold(c: np.ndarray, shape: Mapping[str, float]) -> tuple[float, dict[str, float]]:
+    # a sin(x) + b cos(x) = r sin(x + phase)
+    return float(math.hypot(c[0], c[1])), {**shape, "phase": float(math.atan2(c[1], c[0]))}
+
+
+def scalar(x: Mapping[str, float], period: float, phase: float = 0.0) -> float:
+    return math.sin(2.0 * math.pi * x["q"] / period + phase)
+
+
+def needs(e: Excitation) -> str | None:
+    """A sweep of the position over several ripple periods."""
+    if e.position_range is None:
+        return "no position column"
+    if e.position_range[1] - e.position_range[0] < 0.05:
+        return "position range < 0.05 rad: expected a sweep over several ripple periods"
+    return None
+
+
+EFFECT = Effect(
+    "cogging", cogging, GRID, ("q",),
+    signature="residual against position: a ripple of fixed period",
+    family="position",
+    description="torque ripple periodic in the joint angle (motor cogging, gear tooth mesh)",
+    needs=needs,
+    fit_columns=columns,
+    fold=fold,
+    scalar=scalar,
+    online_signals="q",
+)

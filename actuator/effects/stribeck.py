@@ -1,0 +1,54 @@
+"""``stribeck``: breakaway friction above Coulomb at low speed, decaying with speed.
+
+``phi = s(dq, v_eps) exp(-(dq / v_s)^2)``, ``v_s`` [rad/s] the Stribeck velocity. On-line: ``dq``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..excitation import Excitation, both_directions
+from ..registry import Effect
+from ..signals import Signals, smooth_sign, smooth_sign_scalar
+
+ORDER = 30
+V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
+GRID = tuple({"v_s": v, "v_eps": e} for v in V_S for e in (0.005, 0.01, 0.02))
+
+
+def stribeck(s: Signals, v_s: float, v_eps: float) -> np.ndarray:
+    dq = s["dq"]
+    return smooth_sign(dq, v_eps) * np.exp(-((dq / v_s) ** 2))
+
+
+def scalar(x: Mapping[str, float], v_s: float, v_eps: float) -> float:
+    return smooth_sign_scalar(x["dq"], v_eps) * math.exp(-((x["dq"] / v_s) ** 2))
+
+
+def needs(e: Excitation) -> str | None:
+    """Slow and fast motion: the Stribeck curve needs several speeds."""
+    if e.slow_time < 0.5 or e.fast_time < 0.5:
+        return (f"slow motion {e.slow_time:.1f} s, fast motion {e.fast_time:.1f} s: expected >= 0.5 s of each "
+                "(the Stribeck curve needs several speeds)")
+    return both_directions(e)
+
+
+EFFECT = Effect(
+    "stribeck", stribeck, GRID, ("dq",),
+    signature="residual against velocity: opposite peaks just above and below dq = 0, fading beyond v_s",
+    family="velocity",
+    description="breakaway friction above Coulomb at low speed, decaying with speed",
+    needs=needs,
+    scalar=scalar,
+    online_signals="dq",
+    confusable=("stiction", "coulomb"),
+    experiments={
+        "stiction": "constant-velocity ramps at several slow speeds (0.01 to 0.3 rad/s) and holds approached from "
+        "both sides: Stribeck friction decays with speed, stiction acts only at rest with the sign of the last move",
+        "coulomb": "constant-velocity ramps at several speeds: the Stribeck excess fades with speed, Coulomb "
+        "friction stays",
+    },
+)
