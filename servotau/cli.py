@@ -17,11 +17,11 @@ from servotau.errors import ServotauError
 # command -> module providing register(subparsers)
 COMMANDS = {
     "sim": "servotau.simrobot.app",
-    "control": "servotau.control.app",
+    "control": "servotau.apps.control",
     "demo": "servotau.demo",
     "identify": "servotau.identification.app",
     "model": "servotau.identification.workbench.app",
-    "experiment": "servotau.control.experiments",
+    "experiment": "servotau.experiments",
 }
 
 

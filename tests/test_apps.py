@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from servotau.control.app import run_session
+from servotau.apps.control import run_session
 from servotau.hal.factory import open_backend
 from servotau.hal.log import LogReader
 from servotau.viewer import RerunStream, open_recording

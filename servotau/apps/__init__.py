@@ -1,0 +1,1 @@
+"""Applications: the processes and commands a user starts (``servotau <command>``)."""
