@@ -11,16 +11,17 @@ Phases:
 
 - settle (``settle`` [s], default :data:`SETTLE`): position mode, holding the start posture while the
   estimator's filters fill. On the last settle tick, before its estimate, the F/T offsets are calibrated
-  from the frames of the settle ticks before it (the end effectors touch nothing) and set in the
-  estimator, so that the F/T filter refills with compensated readings from there on.
+  from the frames of the settle ticks before it (the end effectors must touch nothing; with loaded feet
+  pass ``ft_offsets``) and set in the estimator, so that the F/T filter refills with compensated readings.
 - reference: the run's ``mode`` is requested on the first tick after the settle phase (the manager
   switches bumplessly), then ``reference(tick)`` gives the desired joint state every tick until
   ``duration`` [s] has passed or the safety monitor trips (the manager holds the measured position; the
   loop writes that command and stops).
 
-Each tick, in this order: (calibration,) ``estimator.update(frame)``, the mode request, the reference,
-:meth:`LoopHook.before_control`, ``manager.tick``, ``backend.write``, ``backend.ground_truth()`` (only if
-a hook ``wants_truth``), :meth:`LoopHook.on_tick`, the trip check, ``backend.read()``.
+Each tick, in this order: (calibration,) ``estimator.update(frame)``, (the mode request and
+:meth:`LoopHook.settled`,) the reference, :meth:`LoopHook.before_control`, ``manager.tick``,
+``backend.write``, ``backend.ground_truth()`` (only if a hook ``wants_truth``), :meth:`LoopHook.on_tick`,
+the trip check, ``backend.read()``.
 """
 
 from __future__ import annotations
