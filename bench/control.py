@@ -2,9 +2,10 @@
 
 Frames are recorded first from the simulated HRP-2 (30 joints, hanging, right leg in torque mode), then replayed
 through a fresh estimator and controller in a tight loop, as the control process sees them (the simulator runs in
-another process in the real setup). Prints JSON with the median and 99th percentile per tick [us], also split into
-estimation and control. Also the position integral's update alone (control/position_integral.py: 30 joints, the 6 of
-the right leg integrating), without and with a 5-row force-task Jacobian, and its share of the control tick.
+another process in the real setup). Both passes run the control loop (control/loop.py), which times its estimate
+and its control tick. Prints JSON with the median and 99th percentile per tick [us], also split into estimation and
+control. Also the position integral's update alone (control/position_integral.py: 30 joints, the 6 of the right
+leg integrating), without and with a 5-row force-task Jacobian, and its share of the control tick.
 """
 
 import argparse
@@ -13,52 +14,70 @@ import time
 
 import numpy as np
 
-from servotau.control import ControlManager
+from servotau.control.loop import ESTIMATOR_VARIANT, ControlLoop, LoopHook
 from servotau.control.position_integral import PositionIntegral
-from servotau.control.trajectory import TrajectoryPoint
-from servotau.estimation import EstimatorConfig, TorqueEstimator
+from servotau.hal.backends.inprocess import InProcessBackend
 from servotau.simrobot.sim import SimConfig, SimRobot
 
-VARIANT = "low_delay"  # the estimator variant the torque controller is stable with in simulation
-TORQUE_AT = 200  # [ticks] switch to torque mode once the estimator's windows are full
+TORQUE_AT = 200  # [ticks] the settle phase: switch to torque mode once the estimator's windows are full
+
+
+class _Frames(LoopHook):
+    """Keeps every frame (the frames are new objects each tick)."""
+
+    def __init__(self):
+        self.frames = []
+
+    def on_tick(self, tick) -> None:
+        self.frames.append(tick.frame)
+
+
+class _Times(LoopHook):
+    """Estimation and control times [ns] of the ticks after the switch to torque mode."""
+
+    def __init__(self):
+        self.estimation, self.control = [], []
+
+    def on_tick(self, tick) -> None:
+        if tick.k > TORQUE_AT:
+            self.estimation.append(tick.estimation_ns)
+            self.control.append(tick.control_ns)
+
+
+class _Replay:
+    """The recorded frames as a backend: read() returns the next one (the last again at the end), write() drops."""
+
+    def __init__(self, info, frames):
+        self.info, self._frames, self._k = info, frames, 0
+
+    def read(self):
+        frame = self._frames[min(self._k, len(self._frames) - 1)]
+        self._k += 1
+        return frame
+
+    def write(self, q_des) -> None:
+        pass
+
+    def ground_truth(self):
+        return None
 
 
 def record(ticks: int):
     """Frames of a closed-loop run (position, then torque mode) and the robot's info."""
-    robot = SimRobot(SimConfig.named("hanging"))
-    est = TorqueEstimator(robot.info, EstimatorConfig.from_toml(variant=VARIANT))
-    mgr = ControlManager.from_toml(robot.info)
-    frame = robot.read()
-    ref = TrajectoryPoint(frame.q.copy(), np.zeros(30), np.zeros(30))
-    frames = []
-    for k in range(ticks):
-        frames.append(frame)
-        e = est.update(frame)
-        if k == TORQUE_AT:
-            mgr.request_mode("torque")
-        robot.step(mgr.tick(frame, e if e.valid else None, ref).q_des)
-        frame = robot.read()
-    return robot.info, frames, ref
+    backend = InProcessBackend(SimRobot(SimConfig.named("hanging")))
+    kept = _Frames()
+    loop = ControlLoop(backend, mode="torque", settle=TORQUE_AT * backend.info.period, hooks=[kept])
+    loop.run(None, (ticks - TORQUE_AT) * backend.info.period)
+    backend.close()
+    return backend.info, kept.frames
 
 
-def replay(info, frames, ref) -> tuple[np.ndarray, np.ndarray, str]:
+def replay(info, frames) -> tuple[np.ndarray, np.ndarray, str]:
     """Per-tick estimation and control times [us] after the switch to torque mode; the final mode."""
-    est = TorqueEstimator(info, EstimatorConfig.from_toml(variant=VARIANT))
-    mgr = ControlManager.from_toml(info)
-    t_est, t_ctl = [], []
-    clock = time.perf_counter_ns
-    for k, frame in enumerate(frames):
-        if k == TORQUE_AT:
-            mgr.request_mode("torque")
-        t0 = clock()
-        e = est.update(frame)
-        t1 = clock()
-        mgr.tick(frame, e if e.valid else None, ref)
-        t2 = clock()
-        if k > TORQUE_AT:
-            t_est.append(t1 - t0)
-            t_ctl.append(t2 - t1)
-    return np.array(t_est) * 1e-3, np.array(t_ctl) * 1e-3, mgr.mode.value
+    times = _Times()
+    loop = ControlLoop(_Replay(info, frames), mode="torque", settle=TORQUE_AT * info.period, hooks=[times])
+    loop.run(None, (len(frames) - TORQUE_AT) * info.period)
+    return np.array(times.estimation) * 1e-3, np.array(times.control) * 1e-3, loop.manager.mode.value
 
 
 def position_integral_us(n: int = 30, k: int = 5, reps: int = 5000) -> tuple[np.ndarray, np.ndarray]:
@@ -86,10 +105,10 @@ def main() -> None:
     parser.add_argument("--ticks", type=int, default=3000, help="recorded ticks per replay")
     parser.add_argument("--runs", type=int, default=3, help="replays")
     args = parser.parse_args()
-    info, frames, ref = record(args.ticks)
+    info, frames = record(args.ticks)
     est_us, ctl_us, modes = [], [], set()
     for _ in range(args.runs):
-        e, c, mode = replay(info, frames, ref)
+        e, c, mode = replay(info, frames)
         est_us.append(e)
         ctl_us.append(c)
         modes.add(mode)
@@ -102,7 +121,7 @@ def main() -> None:
 
     print(json.dumps({
         "n_joints": info.nq,
-        "estimator_variant": VARIANT,
+        "estimator_variant": ESTIMATOR_VARIANT,
         "mode": "/".join(sorted(modes)),
         "n_ticks": int(tick_us.size),
         "tick_us_p50": pct(tick_us, 50),

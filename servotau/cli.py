@@ -17,11 +17,11 @@ from servotau.errors import ServotauError
 # command -> module providing register(subparsers)
 COMMANDS = {
     "sim": "servotau.apps.sim",
-    "control": "servotau.control.app",
+    "control": "servotau.apps.control",
     "demo": "servotau.apps.demo",
     "identify": "servotau.apps.identify",
     "model": "servotau.apps.model",
-    "experiment": "servotau.control.experiments",
+    "experiment": "servotau.experiments",
 }
 
 

@@ -1,6 +1,6 @@
 """Tests of the controller a user starts: servotau control (in process)."""
 
-from servotau.control.app import run_session
+from servotau.apps.control import run_session
 from servotau.hal.registry import open_backend
 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]

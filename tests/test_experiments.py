@@ -1,4 +1,4 @@
-"""Smoke tests of the paper's experiments (control/experiments.py): short runs, every output written."""
+"""Smoke tests of the paper's experiments (servotau/experiments/): short runs, every output written."""
 
 import csv
 import json
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from servotau.cli import main as cli_main
-from servotau.control import experiments as ex
+from servotau.experiments import common, components, estimation, force, motion
+from servotau.experiments.report import write_results
 from servotau.hal.types import RobotInfo
 from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
 
@@ -16,16 +17,17 @@ from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
 def outputs(tmp_path_factory):
     """Quick motion runs (position, K6 = 1, 0.1) and a 2-period force run, then every experiment's outputs."""
     out = tmp_path_factory.mktemp("experiments")
-    runs = ex.motion_runs(quick=True, out=out)
-    force = ex.force_run(quick=True, out=out)
+    runs = motion.motion_runs(quick=True, out=out)
+    force_run = force.force_run(quick=True, out=out)
     summaries = {
-        "motion": ex.run_motion(out, quick=True, runs=runs),
-        "force": ex.run_force(out, quick=True, run=force),
-        "components": ex.run_components(out, quick=True, runs={"motion K6=1": runs["K6=1"],
-                                                                "motion K6=0.1": runs["K6=0.1"], "force": force}),
-        "estimation": ex.run_estimation(out, quick=True, run=runs["K6=1"]),
+        "motion": motion.run_motion(out, quick=True, runs=runs),
+        "force": force.run_force(out, quick=True, run=force_run),
+        "components": components.run_components(out, quick=True, runs={"motion K6=1": runs["K6=1"],
+                                                                        "motion K6=0.1": runs["K6=0.1"],
+                                                                        "force": force_run}),
+        "estimation": estimation.run_estimation(out, quick=True, run=runs["K6=1"]),
     }
-    doc = ex.write_results(out, out / "results.md")
+    doc = write_results(out, out / "results.md")
     return out, summaries, doc
 
 
@@ -60,7 +62,7 @@ def test_component_shares_sum_to_one_hundred_percent(outputs):
     """The six paper components' RMS shares sum to 100 % on every joint of every run."""
     out, s, _ = outputs
     for name, shares in s["components"]["shares_pct"].items():
-        total = sum(np.asarray(shares[c]) for c in ex.PAPER_COMPONENTS)
+        total = sum(np.asarray(shares[c]) for c in common.PAPER_COMPONENTS)
         np.testing.assert_allclose(total, 100.0, rtol=1e-9, err_msg=name)
     assert (out / "components" / "fig6_components.png").stat().st_size > 0
 
@@ -106,19 +108,19 @@ def test_cli_runs_an_experiment_and_writes_the_document(tmp_path, capsys):
 def test_force_metrics_report_the_worst_apex_and_the_troughs():
     """On a synthetic run: overshoot is the largest apex error, apex_error the one of largest magnitude (an
     undershoot counts), trough_error the same at the negative apexes; the first period is not evaluated."""
-    dt, period, a = 1e-3, 1.0 / ex.FORCE_FREQUENCY, ex.FORCE_AMPLITUDE
-    run = ex.Run("synthetic")
+    dt, period, a = 1e-3, 1.0 / force.FORCE_FREQUENCY, force.FORCE_AMPLITUDE
+    run = common.Run("synthetic")
     apex_scale = {1: 0.90, 2: 1.02}  # positive half-waves of periods 1 and 2: -10 %, +2 % of A
     trough_scale = {1: 0.80, 2: 0.95}  # negative half-waves: the force stays 20 %, 5 % of A above the minimum
     for k in range(int(round(3 * period / dt))):
         t = k * dt
-        s = np.sin(2 * np.pi * ex.FORCE_FREQUENCY * t)
+        s = np.sin(2 * np.pi * force.FORCE_FREQUENCY * t)
         p = int(t // period)
         scale = (apex_scale if s >= 0 else trough_scale).get(p, 1.0)
         run.time.append(t)
         run.f_ref.append(np.array([0.0, 0.0, 300.0 + a * s]))
         run.f_hat.append(np.array([0.0, 0.0, 300.0 + scale * a * s]))
-    m = ex.force_metrics(run)
+    m = force.force_metrics(run)
     np.testing.assert_allclose(m["apex_overshoots_pct"], [-10.0, 2.0], atol=1e-6)
     assert m["overshoot_pct"] == pytest.approx(2.0, abs=1e-6)
     assert m["apex_error_pct"] == pytest.approx(-10.0, abs=1e-6)
@@ -131,13 +133,13 @@ def test_control_config_overrides_change_one_setting_each():
     (the 'k_iq=0' runs), a k7 is a constant velocity gain (the 'k7=' runs: the same k_d at every K6), force axes
     add the force task; without them the shipped integral stays on."""
     info = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
-    shipped = ex._control_config(info, 0.1, ())
-    off = ex._control_config(info, 0.1, ex.FORCE_AXES, k_iq=0.0)
+    shipped = common.control_config(info, 0.1, ())
+    off = common.control_config(info, 0.1, common.FORCE_AXES, k_iq=0.0)
     assert shipped.joint_vector("k_iq")[:6].min() > 0 and shipped.force is None
-    assert not off.joint_vector("k_iq").any() and off.force.axes == ex.FORCE_AXES
+    assert not off.joint_vector("k_iq").any() and off.force.axes == common.FORCE_AXES
     np.testing.assert_allclose(off.joint_vector("k_s"), shipped.joint_vector("k_s"))
-    k_s_at_1 = ex._control_config(info, 1.0, ()).joint_vector("k_s")
+    k_s_at_1 = common.control_config(info, 1.0, ()).joint_vector("k_s")
     np.testing.assert_allclose(k_s_at_1, 10.0 * shipped.joint_vector("k_s"))
-    constant = ex._control_config(info, 0.1, (), k7=0.002).joint_vector("k_d")
-    np.testing.assert_allclose(constant, ex._control_config(info, 1.0, (), k7=0.002).joint_vector("k_d"))
+    constant = common.control_config(info, 0.1, (), k7=0.002).joint_vector("k_d")
+    np.testing.assert_allclose(constant, common.control_config(info, 1.0, (), k7=0.002).joint_vector("k_d"))
     assert constant[:6].min() > 0 and not np.allclose(constant, shipped.joint_vector("k_d"))

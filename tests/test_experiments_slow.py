@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from servotau.control import experiments as ex
+from servotau import experiments as ex
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "runs" / "experiments"

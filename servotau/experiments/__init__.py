@@ -1,0 +1,60 @@
+"""``servotau experiment``: the paper's experiments (Del Prete et al. 2015, section 5) on the simulated HRP-2.
+
+Each run is deterministic (in-process lock-step backend, fixed seed; :mod:`.common`):
+
+- ``motion`` (5.3, Tables 2-3, Fig. 4; :mod:`.motion`): the hanging robot swings its right leg under the native
+  position servo and under torque control at K6 = 1, 0.5, 0.25, 0.1; RMS and max tracking error per right-leg joint
+  [mrad], on the TRUE joint angles (simulator ground truth).
+- ``force`` (5.4, Fig. 5; :mod:`.force`): standing, right foot on a 5 cm block, sinusoidal vertical force reference,
+  K6 = 0.1, K_f = 1; overshoot at the apexes, coupling on x and y, delay (cross-correlation).
+- ``components`` (5.5, Fig. 6; :mod:`.components`): RMS share of each command component in motion (K6 = 1, 0.1)
+  and force control.
+- ``estimation`` (:mod:`.estimation`): estimated vs true joint torques on the motion run (K6 = 1), and the
+  identified motor models against the simulator's servo parameters (config/servo.toml, evaluation only).
+
+Every experiment writes ``<out>/<name>/``: ``summary.json``, tables (CSV and Markdown), PNG figures and,
+with ``--rerun``, one ``.rrd`` per run; then :func:`~.report.write_results` regenerates ``docs/results.md`` from
+all the summaries found under ``<out>`` and the prose of ``results.md.in``. A safety trip is a result (its message
+is recorded), not a crash.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .components import run_components
+from .estimation import run_estimation
+from .force import run_force
+from .motion import run_motion
+from .report import write_results
+
+EXPERIMENTS = {"motion": run_motion, "force": run_force, "components": run_components, "estimation": run_estimation}
+
+__all__ = ["EXPERIMENTS", "main", "register", "write_results"]
+
+
+def register(sub) -> None:
+    p = sub.add_parser("experiment", help="reproduce the paper's experiments (section 5) on the simulated robot")
+    p.add_argument("name", choices=(*EXPERIMENTS, "all"), help="which experiment")
+    p.add_argument("--out", default="runs/experiments", help="output directory (tables, figures, summaries)")
+    p.add_argument("--quick", action="store_true", help="short version (fewer controllers, shorter force run)")
+    p.add_argument("--rerun", action="store_true", help="also save one Rerun .rrd per run under --out")
+    p.add_argument("--doc", default="docs/results.md", help="results document regenerated from --out ('' to skip)")
+    p.set_defaults(func=main)
+
+
+def main(args) -> int:
+    out = Path(args.out)
+    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
+    for name in names:
+        summary = EXPERIMENTS[name](out, quick=args.quick, rerun=args.rerun)
+        print(f"== {name} ({out / name})")
+        for key in ("tables", "table"):
+            if key in summary:
+                tables = summary[key] if isinstance(summary[key], dict) else {"": summary[key]}
+                for t in tables.values():
+                    print(t)
+    if args.doc:
+        write_results(out, Path(args.doc))
+        print(f"wrote {args.doc}")
+    return 0
