@@ -1,7 +1,7 @@
 """Simulator speed: simulated seconds per wall second, in process, 1 kHz, servo and sensors on.
 
 Usage: python bench/sim.py [--json] [--seconds 5]
-Target (issue 2): rtf >= 5 on a 2-core machine.
+Target: rtf >= 5 on a 2-core machine.
 """
 
 from __future__ import annotations

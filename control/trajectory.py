@@ -94,10 +94,10 @@ class ForceCompatiblePosture:
     the force reference varies, the reference follows the measured motion (``q0 + J^+ clip(x, x_max)``), so the
     position feedback does not hold the contact back while ``C`` is learned. With ``refit``, ``C`` is refitted
     every ``calibration`` seconds on the samples since the last fit. Both matter because the compliance grows with
-    the amplitude (the support leg's joints stick in their friction at small motions). Measured on the simulated
-    robot (right foot on the block, 40 N sine): 157 urad of knee per N at an 18 N swing, 224 at 31 N; calibrated
-    against a fixed reference the force reached only the smaller swing and the apex fell 13 % short
-    (docs/control.md). The measured motion lags the force, so at a fit the reference would step from the old
+    the amplitude (the support leg's joints stick in their friction at small motions). On the simulated robot
+    (right foot on the block, 40 N sine) the knee moves 157 urad per N at an 18 N swing and 224 at 31 N, so a ``C``
+    calibrated against a fixed reference keeps the force at the smaller swing (docs/control.md).
+    The measured motion lags the force, so at a fit the reference would step from the old
     displacement to the new ``C (f_d - f0)``; the step fades out linearly over ``fade`` seconds (bumpless: a
     step of a few mrad at K6 = 0.1 puts a 50 % spike on the contact force).
 

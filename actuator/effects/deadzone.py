@@ -34,8 +34,8 @@ SHARES = (0.0, 0.33, 0.67)  # the part of k_v that is the servo's damping (0: a 
 DZ_RELEASE = 1.5
 """Crossing form: the joint leaves the band when ``|m|`` exceeds ``DZ_RELEASE band`` and enters it when ``|m|``
 falls to ``band`` (hysteresis: the effort hovers at the band's edge during a slow crossing, and each flicker
-would restart it from an edge). Tried 1 (none), 1.5 and 2 on the dead-zone log and its pair with cogging:
-falls 0.957 / 0.894 (cogging not kept), 0.953 / 0.952, 0.949 / 0.944."""
+would restart it from an edge). 1.5 keeps the partner in the dead zone's pair with cogging, which 1 (no
+hysteresis) loses; 2 gives lower falls (the three values' falls are in CHANGELOG.md)."""
 
 
 def deadzone(

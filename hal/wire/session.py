@@ -18,8 +18,8 @@ from .protocol import DEFAULT_ENDPOINT
 __all__ = ["DEFAULT_ENDPOINT", "GIL_SWITCH_INTERVAL", "ZENOH_RUNTIME", "Session", "callback", "zenoh_config"]
 
 # [s] CPython's GIL switch interval while a session is open (CPython's default: 5 ms). A message
-# reaches Python in zenoh's callback thread, which must take the GIL from the thread holding it;
-# with 5 ms the lock-step round trip p99 was 1.3-1.5 ms on loopback, with 0.2 ms 0.3 ms.
+# reaches Python in zenoh's callback thread, which must take the GIL from the thread holding it:
+# a loopback ping-pong through callback threads has a p99 of 1.3-1.5 ms with 5 ms, 0.3 ms with 0.2 ms.
 GIL_SWITCH_INTERVAL = 2e-4
 
 # Zenoh's runtime pools (tokio), read once per process when the first session opens. Zenoh's default
