@@ -14,8 +14,9 @@ from servotau.hal.factory import open_backend
 from servotau.hal.log import LogReader
 from servotau.identification.app import hal_for_collection
 from servotau.identification.collect import HoldPlan, SweepPlan
+from servotau.identification.data import load_aligned
 from servotau.identification.operator_script import check_timing, write_sim_setup
-from servotau.identification.pipeline import fit_log, load_aligned
+from servotau.identification.pipeline import fit_log
 from servotau.identification.plan import PHASES, CollectionPlan, FitSettings, load_plan
 from servotau.identification.session import run_collection
 from servotau.simrobot.scenario import Scenario
