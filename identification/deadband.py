@@ -25,6 +25,7 @@ classic dead-zone inverse, smoothed over ``band``.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -90,6 +91,24 @@ def with_dead_band(model, d: float, band: float = BAND, provenance: str = ""):
     return replace(model, extra=extra, provenance=provenance or model.provenance)
 
 
+def dead_bands(aligned, models: Mapping) -> dict[str, DeadBand]:
+    """:func:`rest_dead_band` of every joint of ``aligned`` (the data layer's
+    :class:`~servotau.identification.data.AlignedLog`) with the ``k_tau`` of its model in ``models``."""
+    return {joint: rest_dead_band(s.dq_err, s.tau, s.dq, models[joint].k_tau) for joint, s in aligned.samples.items()}
+
+
+def with_dead_bands(params, aligned, source: str):
+    """``params`` (:class:`~servotau.identification.MotorParameters`) with each joint's ``deadzone`` term measured
+    on the holds of ``aligned`` (:func:`dead_bands`, :func:`with_dead_band`); and the dead bands."""
+    from servotau.actuator import MotorParameters
+
+    bands = dead_bands(aligned, params.models)
+    models = {joint: with_dead_band(params[joint], db.d, provenance=f"{params[joint].provenance}; deadzone: "
+                                    f"identification/deadband.py on the holds of {source}")
+              for joint, db in bands.items()}
+    return MotorParameters(models), bands
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m servotau.identification.deadband",
                                 description="Measure each joint's dead band on the holds of an identification log "
@@ -99,21 +118,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("out", help="motor-parameter file to write")
     args = p.parse_args(argv)
     from servotau.actuator import MotorParameters
-    from servotau.identification.pipeline import load_aligned
+    from servotau.identification.data import load_aligned
     from servotau.identification.plan import load_plan
 
     base = MotorParameters.load_toml(args.motors)
     _, settings = load_plan()
     aligned = load_aligned(args.log, list(base.models), settings)
-    models = {}
-    for joint, s in aligned.samples.items():
-        m = base[joint]
-        db = rest_dead_band(s.dq_err, s.tau, s.dq, m.k_tau)
-        models[joint] = with_dead_band(m, db.d, provenance=f"{m.provenance}; deadzone: identification/deadband.py on "
-                                                           f"the holds of {args.log}")
+    params, bands = with_dead_bands(base, aligned, args.log)
+    for joint, db in bands.items():
         print(f"{joint}: d = {1e3 * db.d:.3f} mrad (rest samples +{db.n_positive}/-{db.n_negative}, spread "
               f"{1e3 * db.spread:.3f} mrad, offset {1e3 * db.offset:+.3f} mrad)")
-    MotorParameters(models).save_toml(args.out)
+    params.save_toml(args.out)
     print(f"wrote {args.out}")
     return 0
 

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from servotau.actuator import EffectTerm, MotorModel
+from servotau.actuator import EffectTerm, MotorModel, MotorParameters
 from servotau.control.config import JointGains
 from servotau.control.torque import JointTorqueController
 from servotau.errors import IdentificationError
-from servotau.identification.deadband import BAND, rest_dead_band, with_dead_band
+from servotau.identification.deadband import BAND, rest_dead_band, with_dead_band, with_dead_bands
 
 K_TAU = 2e-4  # [rad/(N m)]
 
@@ -79,3 +79,24 @@ def test_controller_adds_the_dead_band_in_the_direction_of_the_command(tau):
     dq_err = ctl.update(np.array([tau]), np.array([tau]), np.zeros(1), q_hat=np.zeros(1), ddq_hat=np.zeros(1))
     assert dq_err[0] == pytest.approx(K_TAU * tau + d * np.sign(tau))
     assert ctl.extra[0] == pytest.approx(d * np.sign(tau))
+
+
+def test_with_dead_bands_completes_every_joint_of_a_motor_file_from_the_aligned_holds():
+    """The motor file's deadzone terms come from the holds of the data layer's aligned samples, with each joint's
+    own k_tau; the other terms and the joints' order are kept."""
+    from types import SimpleNamespace
+
+    dq_err, tau, dq = _holds(d=3e-4)
+    samples = {"A": SimpleNamespace(dq_err=dq_err, tau=tau, dq=dq),
+               "B": SimpleNamespace(dq_err=dq_err + 1e-4 * tau, tau=tau, dq=dq)}  # k_tau 3e-4 for B
+    coulomb = {"coulomb": EffectTerm(1e-4, {"v_eps": 0.01})}
+    base = MotorParameters({"A": MotorModel(K_TAU, 0.01, extra=coulomb, provenance="fit A"),
+                            "B": MotorModel(K_TAU + 1e-4, 0.01, provenance="fit B")})
+    params, bands = with_dead_bands(base, SimpleNamespace(samples=samples), "log.parquet")
+    assert list(params) == ["A", "B"] and set(bands) == {"A", "B"}
+    for joint in ("A", "B"):
+        dz = params[joint].extra["deadzone"]
+        assert dz.coefficient == pytest.approx(3e-4, abs=3e-6) == bands[joint].d
+        assert dz.shape == {"band": BAND, "damping_share": 0.0}
+        assert params[joint].provenance.endswith("deadzone: identification/deadband.py on the holds of log.parquet")
+    assert list(params["A"].extra) == ["deadzone", "coulomb"]

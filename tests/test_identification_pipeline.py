@@ -15,7 +15,8 @@ from servotau.errors import ConfigError, IdentificationError
 from servotau.hal.log import LogReader
 from servotau.hal.registry import open_backend
 from servotau.identification.collect import HoldPlan, SweepPlan
-from servotau.identification.pipeline import fit_log, load_aligned
+from servotau.identification.data import load_aligned
+from servotau.identification.pipeline import fit_log
 from servotau.identification.plan import PHASES, CollectionPlan, FitSettings, load_plan
 from servotau.identification.session import run_collection
 from servotau.simrobot.scenario import Scenario

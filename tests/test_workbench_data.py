@@ -5,8 +5,9 @@ import pytest
 from test_workbench_diagnose import synthetic_table
 
 from servotau.errors import IdentificationError
+from servotau.identification.data import shift as shift_signal
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
-from servotau.identification.workbench.data import align_torque, shifted, write_table
+from servotau.identification.workbench.data import align_torque, write_table
 
 
 def test_single_joint_table_from_parquet_and_csv_without_velocity(tmp_path):
@@ -102,7 +103,7 @@ def test_torque_alignment_finds_an_estimator_delay():
     t = cols["t"]
     tau = 30 * np.sin(2 * np.pi * 0.5 * t) + 10 * np.sin(2 * np.pi * 1.7 * t)
     q = 0.3 - 5e-5 * tau
-    static = {"t": t, "q": q, "q_des": np.full(len(t), 0.3), "tau": shifted(tau, -8)}
+    static = {"t": t, "q": q, "q_des": np.full(len(t), 0.3), "tau": shift_signal(tau, -8, fill="hold")}
     ds2, shift2 = align_torque(load_dataset(static, smooth_torque_s=0.0))
     assert shift2 == pytest.approx(0.008)
     assert any("advanced by 8 ms" in n for n in ds2.notes)

@@ -11,8 +11,8 @@ Three layouts are recognised, in this order:
    ``est/tau/<joint>``, optional ``est/dq/<joint>``; pick the joint with ``joint`` (optional when the
    log has one joint). A Parquet log without ``est/tau/<joint>`` (``servotau identify collect`` writes
    the sensors, not estimates) gets the off-line estimator's torque and velocity, as
-   ``servotau identify fit`` does (identification/pipeline.py: centred filters, F/T calibration, RNEA,
-   the torque aligned with the command it answers). The simulator's ground truth (``true/*``) is never
+   ``servotau identify fit`` does (the data layer's ``load_aligned``: centred filters, F/T calibration,
+   RNEA, the torque aligned with the command it answers). The simulator's ground truth (``true/*``) is never
    taken on its own: map it explicitly (``roles={"torque": "true/tau/<joint>"}``) to study the model
    without estimation error.
 3. A single-joint table: ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], optional ``dq``
@@ -36,14 +36,19 @@ import numpy as np
 from servotau.actuator.signals import Signals
 from servotau.errors import IdentificationError
 
-log = logging.getLogger(__name__)
+from ..data import ROLES, read_table, resolve_roles, segments, shift, table_columns, write_table
+from ..data.tables import servotau_joints
 
-ROLES = ("target", "command", "position", "torque", "velocity", "acceleration", "time", "segment")
+__all__ = ["MIN_SAMPLES", "OFFLINE_ESTIMATE", "ROLES", "SG_WINDOW_DDQ_S", "SG_WINDOW_S", "SMOOTH_TAU_S", "Dataset",
+           "align_torque", "describe", "load_dataset", "read_table", "write_table"]
+
+log = logging.getLogger(__name__)
 SG_WINDOW_S = 0.041  # [s] centred SG window of the velocity (41 samples at 1 kHz)
 SG_WINDOW_DDQ_S = 0.081  # [s] centred SG window of the acceleration
 SMOOTH_TAU_S = 0.021  # [s] centred SG smoothing of the torque (21 samples at 1 kHz)
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
+RUN_GAP = 1.5  # [periods] a longer time step ends a run of samples (filters do not cross it)
 _SIGNAL_OF_ROLE = {"position": "q", "command": "q_des", "torque": "tau", "velocity": "dq", "acceleration": "ddq",
                    "time": "t"}
 
@@ -94,108 +99,6 @@ class Dataset:
     def time(self) -> np.ndarray:
         """Time [s], or the sample index if the table has none."""
         return self.signals["t"] if "t" in self.signals else np.arange(self.n, dtype=np.float64)
-
-
-def read_table(path: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a Parquet or CSV file as float arrays (non-numeric columns are skipped)."""
-    p = Path(path)
-    if not p.exists():
-        raise IdentificationError(f"log file {p}: not found: expected a Parquet or CSV file")
-    suffix = p.suffix.lower()
-    try:
-        if suffix in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
-
-            table = pq.read_table(p)
-        elif suffix in (".csv", ".txt"):
-            import pyarrow.csv as pcsv
-
-            table = pcsv.read_csv(p)
-        else:
-            raise IdentificationError(f"log file {p}: unknown format '{suffix}': expected .parquet or .csv")
-    except IdentificationError:
-        raise
-    except Exception as exc:  # pyarrow raises many types for unreadable files
-        raise IdentificationError(f"log file {p}: cannot be read ({exc}): expected a Parquet or CSV table") from exc
-    return table_columns(table)
-
-
-def table_columns(table: object) -> dict[str, np.ndarray]:
-    """Numeric columns of a pyarrow Table or a mapping of name -> array, as float64 arrays."""
-    if hasattr(table, "column_names") and hasattr(table, "column"):
-        raw = {name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names}
-    elif isinstance(table, Mapping):
-        raw = dict(table)
-    else:
-        raise IdentificationError(f"table: got {type(table).__name__}: expected a file, a pyarrow Table or a mapping")
-    out = {}
-    for name, values in raw.items():
-        try:
-            arr = np.asarray(values, dtype=np.float64)
-        except (TypeError, ValueError):
-            continue  # text columns (labels, notes) are not signals
-        if arr.ndim == 1:
-            out[str(name)] = arr
-    return out
-
-
-def servotau_joints(columns: Mapping[str, np.ndarray]) -> list[str]:
-    """Joints of a servotau log (those with ``q/<joint>`` and ``q_des/<joint>``)."""
-    return [c[2:] for c in columns if c.startswith("q/") and f"q_des/{c[2:]}" in columns]
-
-
-def resolve_roles(columns: Mapping[str, np.ndarray], joint: str | None, roles: Mapping[str, str] | None) -> tuple[
-    dict[str, str], str | None
-]:
-    """Column of each role, and the joint, for one of the three layouts of the module doc."""
-    names = list(columns)
-    roles = dict(roles or {})
-    for role, col in roles.items():
-        if role not in ROLES:
-            raise IdentificationError(f"column role '{role}': expected one of {list(ROLES)}")
-        if col not in columns:
-            raise IdentificationError(f"column '{col}' (role {role}): not in the table: expected one of {names}")
-    joints = servotau_joints(columns)
-    if joints and not ({"target", "command"} & set(roles)):
-        if joint is None:
-            if len(joints) > 1:
-                raise IdentificationError(f"the log has joints {joints}: expected --joint to choose one")
-            joint = joints[0]
-        if joint not in joints:
-            raise IdentificationError(f"joint '{joint}': not in the log: expected one of {joints}")
-        found = {"position": f"q/{joint}", "command": f"q_des/{joint}"}
-        for role, candidates in (("torque", (f"est/tau/{joint}", f"tau/{joint}")),
-                                 ("velocity", (f"est/dq/{joint}", f"dq/{joint}"))):
-            col = next((c for c in candidates if c in columns), None)
-            if col is not None:
-                found[role] = col
-        if "t" in columns:
-            found["time"] = "t"
-        if "torque" not in found and "torque" not in roles:
-            raise IdentificationError(
-                f"joint '{joint}': no torque column: expected 'est/tau/{joint}' (a controller's log), a servotau "
-                "Parquet log with its sensors (the off-line estimator then computes it), or a mapping "
-                "torque=COLUMN"
-            )
-        return {**found, **roles}, joint
-    if not roles or not ({"target", "command"} & set(roles)):
-        defaults = {"time": "t", "position": "q", "command": "q_des", "torque": "tau", "velocity": "dq",
-                    "acceleration": "ddq", "segment": "segment"}
-        found = {role: col for role, col in defaults.items() if col in columns}
-        roles = {**found, **roles}
-        missing = [defaults[r] for r in ("command", "position") if r not in roles]
-        if missing:
-            raise IdentificationError(
-                f"missing column(s) {missing}: expected a single-joint table with columns t, q, q_des, tau "
-                f"(optional dq), a servotau log with q/<joint>, or a role mapping (e.g. target=COLUMN); "
-                f"the table has {names}"
-            )
-        return roles, joint
-    if "target" not in roles and not {"command", "position"} <= set(roles):
-        raise IdentificationError("role 'command' needs role 'position' too (target = command - position)")
-    if "time" not in roles and "t" in columns:
-        roles["time"] = "t"
-    return roles, joint
 
 
 def load_dataset(
@@ -263,7 +166,7 @@ def load_dataset(
                 "expected strictly increasing time [s]"
             )
         dt = float(np.median(steps))
-    runs = _runs(valid, used["time"] if "time" in roles else None, dt)
+    runs = segments(used["time"] if "time" in roles else None, dt, valid=valid, max_gap=RUN_GAP)
     if "velocity" not in roles:
         if "position" not in roles:
             raise IdentificationError("no velocity: expected a velocity column or a position column to differentiate")
@@ -309,11 +212,11 @@ def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | Non
         joint = joints[0]
     if joint not in joints or f"est/tau/{joint}" in columns:
         return columns, None  # resolve_roles says what is wrong, or the log has its estimate
-    from servotau.identification.pipeline import load_aligned
+    from ..data import load_aligned
 
     log.info("%s: no est/tau/%s: estimating it off-line from the sensors", path, joint)
     s = load_aligned(path, [joint]).samples[joint]
-    note = (f"est/tau/{joint}, est/dq/{joint}: {OFFLINE_ESTIMATE} (identification/pipeline.py, as "
+    note = (f"est/tau/{joint}, est/dq/{joint}: {OFFLINE_ESTIMATE} (identification/data/aligned.py, as "
             "`servotau identify fit`), not the simulator's ground truth")
     return {**columns, f"est/tau/{joint}": s.tau, f"est/dq/{joint}": s.dq}, note
 
@@ -321,20 +224,6 @@ def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | Non
 def _window(seconds: float, dt: float) -> int:
     w = max(5, int(round(seconds / dt)))
     return w if w % 2 else w + 1
-
-
-def _runs(valid: np.ndarray, t: np.ndarray | None, dt: float | None) -> list[tuple[int, int]]:
-    """Index ranges [a, b) of consecutive valid samples without a time gap."""
-    breaks = np.flatnonzero(np.diff(np.concatenate([[0], valid.astype(np.int8), [0]])))
-    runs = list(zip(breaks[::2].tolist(), breaks[1::2].tolist(), strict=True))
-    if t is None or dt is None:
-        return runs
-    out = []
-    for a, b in runs:
-        gaps = np.flatnonzero(np.diff(t[a:b]) > 1.5 * dt) + 1
-        edges = [a, *(a + gaps).tolist(), b]
-        out += list(zip(edges[:-1], edges[1:], strict=True))
-    return out
 
 
 def _differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window_s: float) -> np.ndarray:
@@ -366,15 +255,6 @@ def describe(ds: Dataset) -> list[str]:
     return [head, f"{ds.n} samples{period}", f"roles: {roles}", *ds.notes]
 
 
-def shifted(x: np.ndarray, k: int) -> np.ndarray:
-    """``x`` advanced by ``k`` samples (``y[i] = x[i + k]``; ``k < 0`` delays), edges held."""
-    if k == 0:
-        return x.copy()
-    if k > 0:
-        return np.concatenate([x[k:], np.full(k, x[-1])])
-    return np.concatenate([np.full(-k, x[0]), x[:k]])
-
-
 def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float]:
     """Re-time the torque column against the encoders (an estimator's delay) and return the shift [s].
 
@@ -403,27 +283,7 @@ def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float
             best, best_c = k, c
     if best == 0:
         return ds, 0.0
-    sig = ds.signals.with_columns(tau=shifted(tau, best))
+    sig = ds.signals.with_columns(tau=shift(tau, best, fill="hold"))
     note = f"tau: advanced by {best * ds.dt * 1e3:.0f} ms to match the encoders (estimator delay)"
     out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note))
     return out, best * ds.dt
-
-
-def write_table(columns: Mapping[str, np.ndarray], path: str | Path) -> Path:
-    """Write columns to a Parquet (``.parquet``) or CSV (``.csv``) file; return the path."""
-    import pyarrow as pa
-
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    table = pa.table({k: np.asarray(v) for k, v in columns.items()})
-    if p.suffix.lower() == ".csv":
-        import pyarrow.csv as pcsv
-
-        pcsv.write_csv(table, p)
-    elif p.suffix.lower() in (".parquet", ".pq"):
-        import pyarrow.parquet as pq
-
-        pq.write_table(table, p)
-    else:
-        raise IdentificationError(f"{p}: unknown format '{p.suffix}': expected .parquet or .csv")
-    return p

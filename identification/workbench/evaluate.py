@@ -4,7 +4,7 @@ Residuals of an actuator model are strongly autocorrelated (filtered velocity, s
 sample-wise split or a classical p-value flatters any extra term. The workbench judges models only on
 held-out *segments*: the log is cut into ``folds`` contiguous blocks (or grouped by its ``segment``
 column); each block is predicted by the model fitted on the others, minus a guard band of ``guard``
-seconds on each side of the block.
+seconds on each side of the block (the data layer's :func:`~servotau.identification.data.blocked_folds`).
 """
 
 from __future__ import annotations
@@ -15,15 +15,16 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from servotau.actuator.loss import Loss
-from servotau.errors import IdentificationError
 
+from ..data.folds import DEFAULT_FOLDS, GUARD_S, Fold, blocked_folds, folds_of
 from ..metrics import overestimation_rate, signed_excess
 from .data import Dataset
 from .model import FittedModel, ModelSpec, fit_spec, resolve_shapes
 
-DEFAULT_FOLDS = 5
-GUARD_S = 0.1  # [s]
 REPORT_W = 10.0  # over-estimation weight of the reported asymmetric loss when fitting by least squares
+
+__all__ = ["DEFAULT_FOLDS", "GUARD_S", "REPORT_W", "Comparison", "Fold", "Metrics", "asymmetric_mean", "blocked_folds",
+           "compare", "cross_validate", "error_of", "folds_of", "metrics"]
 
 
 @dataclass(frozen=True)
@@ -83,45 +84,6 @@ def metrics(target: np.ndarray, model: np.ndarray, loss: Loss) -> Metrics:
 
 
 @dataclass(frozen=True, eq=False)
-class Fold:
-    """One held-out block: ``test`` indices and the boolean ``train`` mask (guard band removed)."""
-
-    test: np.ndarray
-    train: np.ndarray
-    label: str
-
-
-def blocked_folds(n: int, folds: int = DEFAULT_FOLDS, segment: np.ndarray | None = None, guard: int = 0) -> list[Fold]:
-    """Contiguous held-out blocks: by ``segment`` label (consecutive labels grouped into ``folds``
-    blocks) if given with at least 3 labels, else ``folds`` blocks of equal length."""
-    if folds < 2:
-        raise IdentificationError(f"folds = {folds}: expected at least 2 held-out blocks")
-    bounds: list[tuple[int, int, str]] = []
-    if segment is not None:
-        change = np.flatnonzero(np.diff(segment) != 0) + 1
-        starts = np.concatenate([[0], change])
-        ends = np.concatenate([change, [n]])
-        if len(starts) >= 3:
-            groups = np.array_split(np.arange(len(starts)), min(folds, len(starts)))
-            for g in groups:
-                a, b = int(starts[g[0]]), int(ends[g[-1]])
-                labels = sorted({segment[a], segment[b - 1]})
-                bounds.append((a, b, "segment " + "-".join(f"{v:g}" for v in labels)))
-    if not bounds:
-        edges = np.linspace(0, n, folds + 1).round().astype(int)
-        bounds = [(int(a), int(b), f"block {i + 1}/{folds}") for i, (a, b) in enumerate(zip(edges[:-1], edges[1:],
-                                                                                              strict=True))]
-    out = []
-    for a, b, label in bounds:
-        train = np.ones(n, dtype=bool)
-        train[max(0, a - guard) : min(n, b + guard)] = False
-        if not train.any():
-            raise IdentificationError(f"held-out {label}: no training samples left: expected more data or folds")
-        out.append(Fold(np.arange(a, b), train, label))
-    return out
-
-
-@dataclass(frozen=True, eq=False)
 class Comparison:
     """A model against the measurement: fitted on everything (training) and cross-validated (held-out).
 
@@ -147,11 +109,6 @@ class Comparison:
     def residual(self) -> np.ndarray:
         """Held-out residual if available, else the training residual (target - model)."""
         return self.target - (self.heldout_prediction if self.heldout_prediction is not None else self.prediction)
-
-
-def folds_of(ds: Dataset, folds: int = DEFAULT_FOLDS, guard_s: float = GUARD_S) -> list[Fold]:
-    guard = int(round(guard_s / ds.dt)) if ds.dt else 0
-    return blocked_folds(ds.n, folds, ds.segment, guard)
 
 
 def cross_validate(

@@ -1,0 +1,82 @@
+"""Tests of the identification data layer (identification/data/): segments, shifts and held-out splits, with the
+rule of each caller (the paper's pipeline, the workbench) pinned."""
+
+import numpy as np
+import pytest
+
+from servotau.errors import IdentificationError
+from servotau.identification.data import (
+    blocked_folds,
+    holdout_split,
+    resolve_roles,
+    segments,
+    shift,
+    time_blocks,
+)
+
+
+def test_segments_by_tick_cut_at_a_seq_jump_and_at_any_irregular_time_step():
+    """The pipeline's rule: seq steps by one and the time by one period (relative 1e-3), over every row."""
+    t = np.array([0.0, 1e-3, 2e-3, 3e-3, 5e-3, 6e-3, 7e-3, 8e-3])
+    seq = np.array([0, 1, 2, 3, 5, 6, 9, 10])
+    assert segments(t, 1e-3, seq=seq) == [(0, 4), (4, 6), (6, 8)]
+    t2 = np.arange(6) * 1e-3
+    t2[3:] += 0.3e-3  # a step of 1.3 periods: not a tick
+    assert segments(t2, 1e-3, seq=np.arange(6)) == [(0, 3), (3, 6)]
+    assert segments(np.array([]), 1e-3, seq=np.array([], dtype=int)) == []
+
+
+def test_segments_of_valid_rows_cut_only_at_gaps_longer_than_max_gap():
+    """The workbench's rule: runs of valid rows, cut where the time step exceeds max_gap periods."""
+    t = np.array([0.0, 1.0, 2.0, 3.4, 5.0, 6.0, 7.0, 8.0])  # steps 1, 1, 1.4 (kept), 1.6 (cut), 1, 1, 1
+    valid = np.array([True, True, True, True, True, False, True, True])
+    assert segments(t, 1.0, valid=valid, max_gap=1.5) == [(0, 4), (4, 5), (6, 8)]
+    assert segments(None, None, valid=valid) == [(0, 5), (6, 8)]
+    assert segments(None, None, valid=np.zeros(3, bool)) == []
+    with pytest.raises(IdentificationError, match="expected equal"):
+        segments(t, 1.0, valid=valid[:3])
+
+
+def test_shift_fills_with_nan_or_holds_the_edges():
+    x = np.arange(5.0)
+    np.testing.assert_array_equal(shift(x, 2), [2, 3, 4, np.nan, np.nan])
+    np.testing.assert_array_equal(shift(x, -2), [np.nan, np.nan, 0, 1, 2])
+    np.testing.assert_array_equal(shift(x, 2, fill="hold"), [2, 3, 4, 4, 4])
+    np.testing.assert_array_equal(shift(x, -2, fill="hold"), [0, 0, 0, 1, 2])
+    m = np.arange(6.0).reshape(3, 2)
+    np.testing.assert_array_equal(shift(m, 1), [[2, 3], [4, 5], [np.nan, np.nan]])
+    out = shift(x, 0)
+    assert out is not x and np.array_equal(out, x)
+    with pytest.raises(IdentificationError, match="fill"):
+        shift(x, 1, fill="zero")
+
+
+def test_holdout_split_holds_out_every_nth_time_block_then_downsamples_each_set():
+    t = 0.5 + np.arange(9000) * 1e-3  # 9 s from 0.5 s: blocks counted from t[0]
+    valid = np.ones(len(t), bool)
+    valid[100:200] = False
+    train, held = holdout_split(t, valid, 1.0, 3, downsample=10)
+    block = time_blocks(t, 1.0)
+    assert set(np.unique(block[held])) == {2, 5, 8} and not (train & held).any()
+    assert not (train | held)[100:200].any()
+    idx = np.flatnonzero(valid & (block % 3 != 2))
+    np.testing.assert_array_equal(np.flatnonzero(train), idx[::10])
+
+
+def test_blocked_folds_equal_blocks_or_segment_groups_with_a_guard():
+    folds = blocked_folds(100, 4, guard=5)
+    assert [f.label for f in folds] == [f"block {i}/4" for i in range(1, 5)]
+    assert folds[1].test[0] == 25 and not folds[1].train[20:55].any() and folds[1].train[:20].all()
+    seg = np.repeat([1.0, 2.0, 3.0, 4.0], 25)
+    by_segment = blocked_folds(100, 2, seg)
+    assert [f.label for f in by_segment] == ["segment 1-2", "segment 3-4"]
+    with pytest.raises(IdentificationError, match="at least 2"):
+        blocked_folds(100, 1)
+
+
+def test_resolve_roles_of_a_servotau_log_and_of_a_single_joint_table():
+    cols = {"t": np.zeros(3), "q/J": np.zeros(3), "q_des/J": np.zeros(3), "est/tau/J": np.zeros(3)}
+    roles, joint = resolve_roles(cols, None, None)
+    assert joint == "J" and roles == {"position": "q/J", "command": "q_des/J", "torque": "est/tau/J", "time": "t"}
+    roles, joint = resolve_roles({"q": np.zeros(3), "q_des": np.zeros(3)}, None, None)
+    assert joint is None and roles == {"position": "q", "command": "q_des"}
