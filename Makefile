@@ -19,6 +19,7 @@ demo: $(STAMP)
 	$(BIN)/servotau demo
 
 test: $(STAMP)
+	$(BIN)/python .ci/lint-imports
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
 

@@ -1,43 +1,101 @@
-"""Layers: the identification library loads neither the simulator, nor the wire, nor the applications."""
+"""Layers at run time, and the size of the modules.
+
+Who imports whom (the layers, no cycles, no simulator or Zenoh in the libraries) is checked statically by the
+import contracts in pyproject.toml ([tool.importlinter], run by .ci/lint-imports in `make test`). What a static
+graph cannot show is checked here, in fresh interpreters: what importing a library loads at run time (its
+package's lazy attributes, the effects the actuator registry finds, anything imported through importlib).
+"""
+
+from __future__ import annotations
 
 import json
 import subprocess
 import sys
+import tomllib
+from pathlib import Path
 
 import pytest
 
-# Top-level modules and servotau packages, each loaded or not (a fresh interpreter per check).
+REPO = Path(__file__).resolve().parent.parent
+
+# Loaded by no library: the simulator, MuJoCo, the Rerun viewer and the applications; Zenoh only by the HAL
+# modules that talk it (the contracts name the same three).
+HEAVY = ("zenoh", "mujoco", "rerun", "servotau.simrobot", "servotau.apps", "servotau.cli")
+ZENOH_MODULES = ("servotau.hal.wire.session", "servotau.hal.backends.zenoh", "servotau.hal.robot.server")
+LIBRARIES = ("servotau.signal", "servotau.description", "servotau.actuator", "servotau.hal", "servotau.estimation",
+             "servotau.control", "servotau.identification")
+# Imports each module named on the command line, then prints which HEAVY modules that import added.
 _LOADED = """
-import importlib, json, pkgutil, sys
+import importlib, json, sys
+heavy = tuple(json.loads(sys.argv[1]))
+def loaded():  # a third-party package by its top-level name, a servotau module by its full name
+    return {m if m.startswith("servotau.") else m.split(".")[0]
+            for m in sys.modules if any(m == h or m.startswith(h + ".") for h in heavy)}
+out = {}
 for name in sys.argv[2:]:
-    module = importlib.import_module(name)
-    if sys.argv[1] == "walk":
-        for info in pkgutil.iter_modules(module.__path__, name + "."):
-            importlib.import_module(info.name)
-print(json.dumps(sorted(m for m in sys.modules if m.split(".")[0] in ("mujoco", "zenoh")
-                        or m.startswith(("servotau.simrobot", "servotau.control", "servotau.apps")))))
+    before = loaded()
+    importlib.import_module(name)
+    out[name] = sorted(loaded() - before)
+print(json.dumps(out))
+"""
+
+# Every module of the given packages, sub-packages included (a package's __main__ runs a program: not imported).
+_WALK = """
+import importlib, json, pkgutil, sys
+names = []
+for package in sys.argv[1:]:
+    names.append(package)
+    for info in pkgutil.walk_packages(importlib.import_module(package).__path__, package + "."):
+        if info.name.rsplit(".", 1)[-1] != "__main__":
+            names.append(info.name)
+print(json.dumps(names))
 """
 
 
-def loaded(mode: str, *modules: str) -> set[str]:
-    out = subprocess.run([sys.executable, "-c", _LOADED, mode, *modules], capture_output=True, text=True, timeout=120)
+def _run(code: str, *args: str) -> object:
+    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
-    return {m.split(".")[0] if m.split(".")[0] in ("mujoco", "zenoh") else m for m in json.loads(out.stdout)}
+    return json.loads(out.stdout)
 
 
-@pytest.mark.parametrize("package", ["servotau.identification", "servotau.identification.workbench"])
-def test_identification_packages_load_neither_mujoco_nor_zenoh_nor_the_simulator(package):
-    """`import servotau.identification[.workbench]` leaves mujoco, zenoh and servotau.simrobot unloaded."""
-    mods = loaded("import", package)
-    assert not mods & {"mujoco", "zenoh"}, sorted(mods)
-    assert not any(m.startswith("servotau.simrobot") for m in mods), sorted(mods)
+def _heavy_loaded_by(*modules: str) -> dict[str, list[str]]:
+    """For each module, imported in turn in one fresh interpreter, the HEAVY modules its import added."""
+    return _run(_LOADED, json.dumps(HEAVY), *modules)
 
 
-def test_every_identification_module_is_free_of_the_simulator_and_the_applications():
-    """Each module of servotau.identification and its workbench imports without mujoco, servotau.simrobot,
-    servotau.control or servotau.apps (zenoh is not checked here: identification.collect reads hal.types,
-    which loads the hal package)."""
-    mods = loaded("walk", "servotau.identification", "servotau.identification.workbench")
-    assert "mujoco" not in mods, sorted(mods)
-    assert not [m for m in mods if m.startswith(("servotau.simrobot", "servotau.control", "servotau.apps"))], \
-        sorted(mods)
+@pytest.mark.parametrize("module", ["servotau.hal.types", "servotau.hal", *LIBRARIES[:3], *LIBRARIES[4:],
+                                    "servotau.identification.workbench"])
+def test_import_loads_neither_zenoh_nor_mujoco_nor_the_simulator(module):
+    """A controller for a real robot needs neither the simulator nor (until it opens a backend) Zenoh:
+    ``import`` of a library leaves zenoh, mujoco, rerun, servotau.simrobot and the applications unloaded."""
+    assert _heavy_loaded_by(module) == {module: []}
+
+
+def test_every_library_module_loads_neither_the_simulator_nor_the_applications():
+    """Each module of each library, imported in turn, adds none of HEAVY (Zenoh: but for the HAL's three
+    Zenoh modules, imported last so that they hide no other module's import of it)."""
+    names = [n for n in _run(_WALK, *LIBRARIES)]
+    assert "servotau.actuator.effects.coulomb" in names and "servotau.hal.wire.protocol" in names
+    names = [n for n in names if n not in ZENOH_MODULES] + list(ZENOH_MODULES)
+    bad = {m: heavy for m, heavy in _heavy_loaded_by(*names).items()
+           if [h for h in heavy if not (h == "zenoh" and m in ZENOH_MODULES)]}
+    assert bad == {}
+
+
+# -- module size ---------------------------------------------------------------------------------------------
+MAX_LINES = 500
+
+def _package_folders() -> list[Path]:
+    package_dir = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
+    return [REPO / folder for folder in sorted(set(package_dir.values()))]
+
+
+def test_no_module_is_over_500_lines():
+    """Every module of the packages holds at most MAX_LINES lines (pink, mink and upkie keep modules short)."""
+    folders = _package_folders()
+    assert REPO / "hal" in folders and REPO / "servotau" in folders
+    lengths = {str(p.relative_to(REPO)): len(p.read_text().splitlines())
+               for folder in folders for p in sorted(folder.rglob("*.py"))}
+    assert len(lengths) > 100
+    too_long = {p: n for p, n in lengths.items() if n > MAX_LINES}
+    assert too_long == {}

@@ -94,7 +94,7 @@ def test_a_residual_with_memory_no_effect_explains_is_unexplained():
     """An error with 50 ms of memory that no present signal gives (like the error inside a dead band crossed
     freely, which depends on where the joint entered): no effect and no function of the present signals removes
     20 %, the residual's own past does (the memory probe): unexplained. (White noise: the clean synthetic test.)"""
-    from servotau.identification.workbench.diagnose import PROBE_FACTOR
+    from servotau.identification.workbench.verdict import PROBE_FACTOR
 
     rng = np.random.default_rng(1)
     a = np.exp(-1e-3 / 0.05)  # 50 ms at 1 kHz

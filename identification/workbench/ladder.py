@@ -19,9 +19,10 @@ from servotau.actuator import FitMetrics, Loss, MotorModel, MotorParameters, get
 from servotau.errors import IdentificationError
 
 from .data import Dataset
-from .diagnose import MIN_GAIN, Diagnosis, _r, diagnose
+from .diagnose import MIN_GAIN, Diagnosis, diagnose
 from .evaluate import Comparison, Fold, compare, folds_of
 from .model import FittedModel, ModelSpec, Term, resolve_shapes
+from .verdict import _r
 
 SWEEPS = 3
 

@@ -1,0 +1,148 @@
+"""Non-parametric probes of the diagnosis (:mod:`.diagnose`): flexible functions of one family of signals,
+fitted to the current model's residual on the training blocks and scored on the held-out block.
+
+The families: bins of velocity; of torque by velocity sign; of ``u`` by velocity sign; of position; a
+polynomial drift in time; lagged differences of ``u`` and ``q_des`` (``dynamics``); and the residual's own past
+(``memory``). A probe's held-out gain is what a free function of its signals removes: the yardstick of the
+effects of its family.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from servotau.actuator import Loss
+from servotau.actuator.signals import delayed, ticks
+
+from .data import SMOOTH_TAU_S, Dataset
+from .evaluate import Fold, error_of
+from .model import FittedModel, ModelSpec, design, fit_spec, solve
+
+MEMORY_HORIZON_S = SMOOTH_TAU_S
+MEMORY_LAGS = (1, 2, 4)
+"""The memory probe predicts the held-out residual from its own values ``k h`` earlier (``k`` in ``MEMORY_LAGS``,
+``h`` = ``MEMORY_HORIZON_S`` [s], the torque's smoothing window): noise that the workbench's filters spread over
+neighbouring samples is forgotten after ``h`` (the velocity's longer SG window carries ``k_v`` times a
+differentiated encoder noise, orders smaller), so a residual still predictable ``h`` ahead has a state no term
+models. Three coefficients fitted on the training blocks, the residual's past read as on-line (causal)."""
+
+
+@dataclass(eq=False)
+class FoldBase:
+    """The current model fitted on one fold's training blocks: its design, and its prediction of every row."""
+
+    fold: Fold
+    ctx: dict
+    names: list[str]
+    a: np.ndarray
+    pred: np.ndarray  # base prediction on all rows, fitted on the fold's training rows
+
+
+def base_per_fold(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], cache: dict) -> list[FoldBase]:
+    out = []
+    for f in folds:
+        m = fit_spec(ds.signals, ds.target, spec, loss, rows=f.train, cache=cache, drop_unexcited=True)
+        ctx = m.context(ds.signals)
+        names, a, _ = design(ds.signals, spec, ctx, cache)
+        x = solve(names, a, ds.target, loss, f.train, drop_unexcited=True)
+        out.append(FoldBase(f, ctx, names, a, a @ x))
+    return out
+
+
+def _onehot(index: np.ndarray, k: int) -> np.ndarray:
+    m = np.zeros((len(index), k))
+    m[np.arange(len(index)), index] = 1.0
+    return m
+
+
+def _quantile_bins(x: np.ndarray, k: int) -> np.ndarray:
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, k + 1)[1:-1]))
+    return np.searchsorted(edges, x)
+
+
+def _velocity_class(dq: np.ndarray, v: float = 0.01) -> np.ndarray:
+    return np.where(dq > v, 2, np.where(dq < -v, 0, 1))
+
+
+def _by_class(x: np.ndarray, cls: np.ndarray, k: int) -> np.ndarray:
+    b = _quantile_bins(x, k)
+    return _onehot(cls * (b.max() + 1) + b, 3 * (b.max() + 1))
+
+
+def probe_columns(signals, u: np.ndarray) -> dict[str, np.ndarray]:
+    """Flexible regressors of each signal family (columns without any sample dropped)."""
+    dq = signals["dq"]
+    cls = _velocity_class(dq)
+    out = {"velocity": _onehot(_quantile_bins(dq, 24), 24)}
+    if "tau" in signals:
+        out["torque"] = _by_class(signals["tau"], cls, 12)
+    out["servo_error"] = _by_class(u, cls, 12)
+    if "q" in signals:
+        q = signals["q"]
+        span = float(np.ptp(q))
+        if span > 0:
+            idx = np.minimum(((q - q.min()) / span * 64).astype(int), 63)
+            out["position"] = _onehot(idx, 64)
+    if "t" in signals:
+        t = signals["t"]
+        x = (t - t.mean()) / (np.ptp(t) or 1.0)
+        s = np.tanh(dq / 0.01)
+        out["time"] = np.column_stack([x, x * x, x * dq, x * x * dq, x * s, x * x * s])
+    if signals.dt is not None:
+        cols = []
+        for lag in (0.002, 0.005, 0.01, 0.02, 0.04):
+            k = ticks(lag, signals.dt)
+            cols += [delayed(u, k) - u, np.concatenate([u[k:], np.full(k, u[-1])]) - u]
+            if "q_des" in signals:
+                cols.append(signals["q_des"] - delayed(signals["q_des"], k))
+        if "ddq" in signals:
+            cols.append(signals["ddq"])
+        out["dynamics"] = np.column_stack(cols)
+    return {k: m[:, np.any(m != 0, axis=0)] for k, m in out.items()}
+
+
+def _ridge(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    scale = np.sqrt(np.mean(a * a, axis=0))
+    scale[scale == 0] = 1.0
+    an = a / scale
+    g = an.T @ an
+    g[np.diag_indices_from(g)] += 1e-6 * np.trace(g) / len(g)
+    return np.linalg.solve(g, an.T @ b) / scale
+
+
+def probe_gains(
+    ds: Dataset, bases: list[FoldBase], base: FittedModel, loss: Loss, e0: float, only: str | None = None
+) -> dict[str, float]:
+    y = ds.target
+    cols = probe_columns(ds.signals, base.u(ds.signals))
+    out = {}
+    for family, p in cols.items():
+        if p.shape[1] == 0 or (only is not None and family != only):
+            continue
+        pred = np.full(ds.n, np.nan)
+        for b in bases:
+            tr, te = b.fold.train, b.fold.test
+            beta = _ridge(p[tr], y[tr] - b.pred[tr])
+            pred[te] = b.pred[te] + p[te] @ beta
+        out[family] = 1.0 - error_of(y - pred, y, loss) / e0 if e0 > 0 else 0.0
+    if ds.signals.dt is not None and only in (None, "memory"):
+        out["memory"] = _memory_gain(ds, bases, loss, e0)
+    return out
+
+
+def _memory_gain(ds: Dataset, bases: list[FoldBase], loss: Loss, e0: float) -> float:
+    """Held-out gain of predicting the residual from its own past (:data:`MEMORY_LAGS` x :data:`MEMORY_HORIZON_S`):
+    per block, the residual of the model fitted on the other blocks, its past read causally."""
+    y = ds.target
+    h = ticks(MEMORY_HORIZON_S, ds.signals.dt)
+    pred = np.full(ds.n, np.nan)
+    for b in bases:
+        tr, te = b.fold.train, b.fold.test
+        r = y - b.pred
+        p = np.column_stack([delayed(r, k * h) for k in MEMORY_LAGS])
+        pred[te] = b.pred[te] + p[te] @ _ridge(p[tr], r[tr])
+    return 1.0 - error_of(y - pred, y, loss) / e0 if e0 > 0 else 0.0
+
+

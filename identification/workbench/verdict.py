@@ -1,0 +1,276 @@
+"""The diagnosis's result (:class:`Diagnosis`, its :class:`Candidate` effects and :class:`Confusion`) and its
+verdict (see :mod:`.diagnose`): ``missing_effect``, ``unexplained`` or ``no_missing_effect``, with the message
+that says why, the experiments that separate look-alike effects, and the residual's tail.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from servotau.actuator import EXPERIMENTS, Excitation, get_effect
+from servotau.errors import IdentificationError
+
+from .data import Dataset
+from .evaluate import Comparison
+from .model import FittedModel, ModelSpec, design
+from .probes import MEMORY_HORIZON_S
+
+PROBE_FACTOR = 2.0
+"""A probe (tens of free parameters) names ``unexplained`` structure from ``PROBE_FACTOR * min_gain`` on."""
+
+TAIL_FRACTION = 0.02
+TAIL_SHARE = 0.5
+"""``unexplained`` also when the ``TAIL_FRACTION`` largest held-out residuals carry more than ``TAIL_SHARE`` of
+the squared error (about 0.14 for Gaussian residuals) and most of them sit at the largest servo effort: the
+model fails at its limit (saturation). Residuals of real servos are heavy-tailed anyway (dead-band crossings
+carry two thirds of the squared error of the simulated default servo), hence the second condition."""
+
+VERDICTS = ("missing_effect", "no_missing_effect", "unexplained")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One effect's score against the current model.
+
+    Attributes:
+        effect: Effect name.
+        heldout_gain: Fraction of the held-out error removed (can be negative: the effect over-fits).
+        heldout_error: Held-out error with the effect.
+        train_gain: Fraction of the training error removed (fitted on everything).
+        fold_gains: Held-out gain per block.
+        consistent: The effect helps in all held-out blocks but at most one.
+        shape: Shape chosen on all samples (least training error).
+        coefficient: Coefficient at that shape (all samples).
+        at_grid_edge: The chosen shape is the first or last of a one-parameter grid: the true shape may
+            lie outside.
+        testable: The data excited the effect.
+        reason: Why not testable (or why every fit failed).
+        family: Probe family.
+        explained: ``heldout_gain`` over the gain of its family's probe (None without probe).
+        partial: Explains less than ``PARTIAL`` of what its family's probe finds, or (named effect) the
+            probe still removes ``REMAINING``, and a quarter of the effect's gain, once the effect is in the model.
+        remaining: For the named effect, the gain of its family's probe on the model with the effect.
+    """
+
+    effect: str
+    heldout_gain: float
+    heldout_error: float
+    train_gain: float
+    fold_gains: tuple[float, ...]
+    consistent: bool
+    shape: Mapping[str, float]
+    coefficient: float
+    at_grid_edge: bool
+    testable: bool
+    reason: str | None
+    family: str
+    explained: float | None = None
+    partial: bool = False
+    remaining: float | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "effect": self.effect,
+            "heldout_gain": _r(self.heldout_gain),
+            "heldout_error": _r(self.heldout_error),
+            "train_gain": _r(self.train_gain),
+            "fold_gains": [_r(g) for g in self.fold_gains],
+            "consistent": self.consistent,
+            "shape": {k: _r(v) for k, v in self.shape.items()},
+            "coefficient": _r(self.coefficient),
+            "at_grid_edge": self.at_grid_edge,
+            "testable": self.testable,
+            "reason": self.reason,
+            "family": self.family,
+            "explained": None if self.explained is None else _r(self.explained),
+            "partial": self.partial,
+            "remaining": None if self.remaining is None else _r(self.remaining),
+        }
+
+
+@dataclass(frozen=True)
+class Confusion:
+    """Two effects the data cannot tell apart well, and the experiment that would."""
+
+    effects: tuple[str, str]
+    gains: tuple[float, float]
+    correlation: float  # of their columns once the current model's columns are projected out
+    experiment: str
+
+    def to_dict(self) -> dict:
+        return {"effects": list(self.effects), "gains": [_r(g) for g in self.gains],
+                "correlation": _r(self.correlation), "experiment": self.experiment}
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """Result of :func:`~servotau.identification.workbench.diagnose.diagnose`.
+
+    Attributes:
+        verdict: One of :data:`VERDICTS`.
+        base: The current model against the measurement (training and held-out).
+        ranking: Every effect, testable ones first, by held-out gain.
+        probes: Held-out gain of each non-parametric probe family.
+        excitation: What the data exercised.
+        min_gain: Threshold used.
+        confusion: The top two effects if they are a documented confusable pair (or nearly tie).
+        message: One-paragraph human summary.
+    """
+
+    verdict: str
+    base: Comparison
+    ranking: tuple[Candidate, ...]
+    probes: Mapping[str, float]
+    excitation: Excitation
+    min_gain: float
+    confusion: Confusion | None = None
+    message: str = ""
+    experiments: Mapping[str, str] = field(default_factory=dict)
+    tail_share: float = 0.0
+
+    @property
+    def top(self) -> Candidate | None:
+        return self.ranking[0] if self.ranking and self.ranking[0].testable else None
+
+    @property
+    def runner_up(self) -> Candidate | None:
+        tested = [c for c in self.ranking if c.testable]
+        return tested[1] if len(tested) > 1 else None
+
+    def candidate(self, effect: str) -> Candidate:
+        for c in self.ranking:
+            if c.effect == effect:
+                return c
+        names = [c.effect for c in self.ranking]
+        raise IdentificationError(f"effect '{effect}' was not ranked: expected one of {names}")
+
+    def rank_of(self, effect: str) -> int:
+        """1-based rank among testable effects (0 if untestable or not ranked)."""
+        tested = [c.effect for c in self.ranking if c.testable]
+        return tested.index(effect) + 1 if effect in tested else 0
+
+    def to_dict(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "message": self.message,
+            "model": self.base.model.spec.label(),
+            "min_gain": self.min_gain,
+            "ranking": [c.to_dict() for c in self.ranking],
+            "runner_up": None if self.runner_up is None else self.runner_up.effect,
+            "probes": {k: _r(v) for k, v in self.probes.items()},
+            "confusion": None if self.confusion is None else self.confusion.to_dict(),
+            "untestable": {c.effect: c.reason for c in self.ranking if not c.testable},
+            "experiments": dict(self.experiments),
+            "tail_share": _r(self.tail_share),
+            "train": self.base.train.to_dict(),
+            "heldout": None if self.base.heldout is None else self.base.heldout.to_dict(),
+            "excitation": self.excitation.to_dict(),
+        }
+
+
+def _r(x: float) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(f"{x:.6g}")
+
+
+def _orthogonal_correlation(ds: Dataset, spec: ModelSpec, base: FittedModel, a: str, b: str, shapes) -> float:
+    ctx = base.context(ds.signals)
+    names, m, _ = design(ds.signals, spec, ctx)
+    su = ds.signals.with_columns(**ctx)
+    ca = get_effect(a).evaluate(su, shapes[a])
+    cb = get_effect(b).evaluate(su, shapes[b])
+    q, _ = np.linalg.qr(m)
+    ra, rb = ca - q @ (q.T @ ca), cb - q @ (q.T @ cb)
+    den = float(np.linalg.norm(ra) * np.linalg.norm(rb))
+    return float(ra @ rb / den) if den > 0 else float("nan")
+
+
+def verdict_of(ds, spec, base, ranking, probes, exc, min_gain) -> Diagnosis:
+    named = [c for c in ranking if c.testable and c.heldout_gain >= min_gain and c.consistent]
+    experiments = {}
+    confusion = None
+    if named:
+        top = named[0]
+        verdict = "missing_effect"
+        tested = [c for c in ranking if c.testable]
+        second = tested[1] if len(tested) > 1 else None
+        eff = get_effect(top.effect)
+        for other in eff.confusable:
+            key = frozenset((top.effect, other))
+            if key in EXPERIMENTS:
+                experiments[other] = EXPERIMENTS[key]
+        if second is not None and second.heldout_gain > 0 and (
+            second.effect in eff.confusable or top.effect in get_effect(second.effect).confusable
+            or second.heldout_gain >= 0.9 * top.heldout_gain
+        ) and second.heldout_gain >= 0.5 * top.heldout_gain:
+            corr = _orthogonal_correlation(ds, spec, base.model, top.effect, second.effect,
+                                           {top.effect: top.shape, second.effect: second.shape})
+            text = EXPERIMENTS.get(frozenset((top.effect, second.effect)),
+                                   "excite the two effects separately (see docs/workbench.md, effect library)")
+            confusion = Confusion((top.effect, second.effect), (top.heldout_gain, second.heldout_gain), corr, text)
+        shape = ", ".join(f"{k} = {v:.3g}" for k, v in top.shape.items())
+        message = (f"missing effect: {top.effect}" + (f" ({shape})" if shape else "")
+                   + f" removes {100 * top.heldout_gain:.0f} % of the held-out error")
+        if top.partial:
+            message += (f"; partially explained: a free function of its signals ({top.family}) removes "
+                        f"{100 * probes[top.family]:.0f} %"
+                        + (f", and still {100 * top.remaining:.0f} % with the effect in the model"
+                           if top.remaining is not None else "")
+                        + ": the shape may lie outside the grid")
+        if second is not None:
+            message += f"; runner-up {second.effect} ({100 * second.heldout_gain:.0f} %)"
+        if confusion is not None:
+            message += f"; to separate them: {confusion.experiment}"
+    else:
+        # a function of the present signals says which; the memory probe (any smooth residual) only that some remains
+        best_probe = max(((k, v) for k, v in probes.items() if k != "memory"), key=lambda kv: kv[1],
+                         default=(None, 0.0))
+        memory = probes.get("memory", 0.0)
+        tail, where = _tail(ds, base)
+        no_effect = f"unexplained: no effect of the library removes {100 * min_gain:.0f} % of the held-out error, "
+        if best_probe[0] is not None and best_probe[1] >= PROBE_FACTOR * min_gain:
+            verdict = "unexplained"
+            message = no_effect + (f"but a free function of the {best_probe[0]} signals removes "
+                                   f"{100 * best_probe[1]:.0f} %")
+        elif memory >= PROBE_FACTOR * min_gain:
+            verdict = "unexplained"
+            message = no_effect + (f"but the residual's own past ({1e3 * MEMORY_HORIZON_S:.0f} ms and more earlier) "
+                                   f"predicts {100 * memory:.0f} % of it: a state no term models (e.g. a dead band "
+                                   "crossed freely in a log without the command: the error depends on where the "
+                                   "joint entered)")
+        elif tail >= TAIL_SHARE and where:
+            verdict = "unexplained"
+            message = (f"unexplained: {100 * tail:.0f} % of the squared held-out error sits in "
+                       f"{100 * TAIL_FRACTION:.0f} % of the samples{where}; no effect of the library removes "
+                       f"{100 * min_gain:.0f} %")
+        else:
+            verdict = "no_missing_effect"
+            best = next((c for c in ranking if c.testable), None)
+            message = "no missing effect: no effect removes " + f"{100 * min_gain:.0f} % of the held-out error"
+            if best is not None:
+                message += f" (best: {best.effect}, {100 * best.heldout_gain:.1f} %)"
+    untestable = [c.effect for c in ranking if not c.testable]
+    if untestable:
+        message += f"; untestable on this data: {', '.join(untestable)}"
+    return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0])
+
+
+
+
+def _tail(ds: Dataset, base: Comparison) -> tuple[float, str]:
+    """Share of the squared held-out error in the largest ``TAIL_FRACTION`` of the residuals, and where."""
+    r = base.residual
+    k = max(1, int(TAIL_FRACTION * len(r)))
+    idx = np.argsort(np.abs(r))[-k:]
+    share = float(np.sum(r[idx] ** 2) / np.sum(r * r)) if np.any(r) else 0.0
+    ctx = base.model.context(ds.signals)
+    m = np.abs(ctx["u"] - 0.67 * ctx["u_v"])
+    top = m >= np.quantile(m, 0.95)
+    where = ""
+    if top[idx].mean() > 0.5:
+        where = (f" where the servo effort |u| is in its top 5 % ({100 * top[idx].mean():.0f} % of them): a current "
+                 "limit (saturation) that no model of the torque can follow")
+    return share, where
