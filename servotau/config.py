@@ -69,6 +69,10 @@ class Section:
         shown = "missing" if value is _MISSING else f"= {value!r}"
         return ConfigError(f"{self.file}: field '{self._name(key)}' {shown}: expected {expected}")
 
+    def missing(self, key: str, expected: str) -> ConfigError:
+        """Build the error for the missing field ``key`` where ``expected`` was wanted."""
+        return self.error(key, _MISSING, expected)
+
     def __contains__(self, key: str) -> bool:
         return key in self.data
 
@@ -405,12 +409,13 @@ def load_dataclass(cls: type[T], section: Section, *, ignore: Iterable[str] = ()
 
 def check_settings(obj: Any, error: type[Exception] = ConfigError) -> None:
     """Validate a directly built config dataclass against its :func:`setting` metadata (in place:
-    numbers become float or int, lists become tuples or arrays). Call it from ``__post_init__``.
+    numbers become float or int, lists become tuples or arrays). Call it from ``__post_init__``; fields
+    declared without :func:`setting` are left to the class's own checks.
 
     Raises:
         error: ``"<Class>.<field> = <value>: expected <what> [unit]"``.
     """
-    fields = _fields(type(obj))
+    fields = [(f, tp) for f, tp in _fields(type(obj)) if _SETTING in f.metadata]  # the others: the class's own
     for f, tp in fields:
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(tp):
