@@ -361,7 +361,9 @@ def load_dataclass(cls: type[T], section: Section, *, ignore: Iterable[str] = ()
                    **given: Any) -> T:
     """Build the config dataclass ``cls`` from a TOML section.
 
-    Every field of ``cls`` is read from the key of the same name, converted to its annotated type
+    Every field of ``cls`` declared with :func:`setting` (or typed as a config dataclass) is read from the
+    key of the same name (the other fields are not config keys: the caller gives them, or they take their
+    default), converted to its annotated type
     (float, int, bool, str, tuples of these, ``np.ndarray`` of a given ``shape``, ``X | None``, or a
     nested config dataclass read from a sub-table) and checked against its :func:`setting` bounds; a
     missing key takes the field's default, or the value of ``base`` (an instance of ``cls``) if given
@@ -372,7 +374,7 @@ def load_dataclass(cls: type[T], section: Section, *, ignore: Iterable[str] = ()
     Raises:
         ConfigError: Naming the file, the dotted field, the value and the expected value and unit.
     """
-    fields = _fields(cls)
+    fields = [(f, tp) for f, tp in _fields(cls) if _SETTING in f.metadata or dataclasses.is_dataclass(tp)]
     known = {f.name for f, _ in fields}
     section.check_keys(known | set(ignore))
     kwargs = dict(given)

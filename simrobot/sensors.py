@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from servotau.config import Section, load_toml
+from servotau.config import Section, load_dataclass, load_toml, setting
 from servotau.hal.types import (
     FT_SENSOR_NAMES,
     STATUS_INVALID,
@@ -24,10 +24,10 @@ class SensorFault:
     """A scripted sensor fault: ``sensor`` (one of STATUS_NAMES) gives ``kind`` ("nan" or "stale")
     readings from ``start`` for ``duration`` seconds of sim time."""
 
-    sensor: str
-    kind: str
-    start: float  # [s]
-    duration: float  # [s]
+    sensor: str = setting(choices=STATUS_NAMES)
+    kind: str = setting(choices=("nan", "stale"))
+    start: float = setting(unit="s", min=0)
+    duration: float = setting(unit="s", min=0)
 
 
 @dataclass(frozen=True)
@@ -56,18 +56,8 @@ class SensorConfig:
         raw_faults = root.data.get("faults", [])
         if not isinstance(raw_faults, list) or not all(isinstance(f, dict) for f in raw_faults):
             raise root.error("faults", raw_faults, "an array of tables [[faults]]")
-        faults = []
-        for i, raw in enumerate(raw_faults):
-            sec = Section(raw, root.file, f"faults[{i}]")
-            sec.check_keys(["sensor", "kind", "start", "duration"])
-            faults.append(
-                SensorFault(
-                    sensor=sec.str("sensor", choices=STATUS_NAMES),
-                    kind=sec.str("kind", choices=("nan", "stale")),
-                    start=sec.float("start", min=0.0, unit="s"),
-                    duration=sec.float("duration", min=0.0, unit="s"),
-                )
-            )
+        faults = [load_dataclass(SensorFault, Section(raw, root.file, f"faults[{i}]"))
+                  for i, raw in enumerate(raw_faults)]
         return cls(
             encoder_resolution=enc.float("resolution", min=0.0, unit="rad"),
             gyro_noise=imu.float("gyro_noise", min=0.0, unit="rad/s"),
