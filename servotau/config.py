@@ -409,6 +409,26 @@ def load_dataclass(cls: type[T], section: Section, *, ignore: Iterable[str] = ()
         raise ConfigError(f"{section.file}{where}: {exc}") from exc
 
 
+def read_setting(cls: type, name: str, section: Section, key: str | None = None) -> Any:
+    """One field ``name`` of the config dataclass ``cls`` read from ``key`` (default: ``name``) of a section
+    whose layout differs from the dataclass's (the field's type, bounds, unit and default apply).
+
+    Raises:
+        ConfigError: Naming the file, the dotted key, the value and the expected value and unit.
+    """
+    key = key or name
+    f, tp = dict((f.name, (f, tp)) for f, tp in _fields(cls))[name]
+    if key not in section:
+        default = _default(f)
+        if default is _MISSING:
+            raise section.error(key, _MISSING, _expected("a value", _spec(f)))
+        return default
+    value, expected = _convert(section.data[key], tp, _spec(f).fixed())
+    if expected is not None:
+        raise section.error(key, value, expected)
+    return value
+
+
 def check_settings(obj: Any, error: type[Exception] = ConfigError) -> None:
     """Validate a directly built config dataclass against its :func:`setting` metadata (in place:
     numbers become float or int, lists become tuples or arrays). Call it from ``__post_init__``; fields

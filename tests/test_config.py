@@ -159,3 +159,16 @@ def test_numpy_scalars_are_numbers():
     """numpy integers and floats pass as int and float (converted to the Python types)."""
     w = _Window(np.int64(10), np.int64(2), np.float32(0.5), 2.0)
     assert type(w.window) is int and w.window == 10 and type(w.hold) is float
+
+
+def test_read_setting_reads_one_field_under_another_key():
+    """``read_setting`` applies a field's type, bounds, unit and default to a key of another layout."""
+    from servotau.config import read_setting
+
+    sec = Section({"resolution": 2, "bad": -1}, "cfg.toml", "encoders")
+    assert read_setting(_Settings, "period", sec, "resolution") == 2.0
+    assert read_setting(_Settings, "count", sec, "missing") == 3
+    with pytest.raises(ConfigError, match=r"field 'encoders.bad' = -1: expected a finite number > 0 \[s\]"):
+        read_setting(_Settings, "period", sec, "bad")
+    with pytest.raises(ConfigError, match=r"field 'encoders.period' missing: expected a value > 0 \[s\]"):
+        read_setting(_Settings, "period", sec)

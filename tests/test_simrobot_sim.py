@@ -292,3 +292,15 @@ def test_scenario_operator_and_sim_files_take_the_dataclass_defaults(tmp_path):
                                                                    'start = 0.0\nduration = 1.0\n')
     with pytest.raises(ConfigError, match=r"field 'faults\[0\].kind' = 'inf': expected one of \['nan', 'stale'\]"):
         SensorConfig.from_toml(sensors)
+
+
+def test_sensor_file_errors_name_the_table_key(tmp_path):
+    """A sensors file's keys are checked with SensorConfig's units and bounds, named by table and key."""
+    text = (CONFIG_DIR / "sensors.toml").read_text()
+    p = tmp_path / "sensors.toml"
+    p.write_text(text.replace("resolution = 1.0e-5", "resolution = -1.0"))
+    with pytest.raises(ConfigError, match=r"field 'encoders.resolution' = -1.0: expected a finite number >= 0 \[rad\]"):
+        SensorConfig.from_toml(p)
+    p.write_text(text.replace("offset_scale = [3.0, 0.3]", "offset_scale = [3.0]"))
+    with pytest.raises(ConfigError, match=r"field 'ft.offset_scale' = \[3.0\]: expected a list of 2 finite numbers"):
+        SensorConfig.from_toml(p)
