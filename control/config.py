@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
 
 from servotau.actuator import MotorModel, MotorParameters, checked_online_model, effect_names
-from servotau.config import CONFIG_DIR, Section, load_toml, resolve_config_path
+from servotau.config import CONFIG_DIR, Section, check_settings, load_dataclass, load_toml, resolve_config_path, setting
 from servotau.errors import ConfigError, ControlError, IdentificationError
 from servotau.hal.types import FT_SENSOR_NAMES, RobotInfo
 
@@ -38,33 +38,36 @@ AXES = ("fx", "fy", "fz", "tx", "ty", "tz")
 """Wrench axes, in the order of HAL wrenches ``[fx, fy, fz, tx, ty, tz]``."""
 
 
-def _finite(name: str, value: object, ok, expected: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.number) or not math.isfinite(value):
-        raise ControlError(f"{name} = {value!r}: expected {expected}")
-    if not ok(float(value)):
-        raise ControlError(f"{name} = {value!r}: expected {expected}")
-    return float(value)
-
-
 @dataclass(frozen=True)
 class JointGains:
     """Torque-control gains of one joint (paper eq. 11-12)."""
 
-    k_p: float = 2.0  # [-] torque proportional gain (paper: 2)
-    k_s: float = 0.0  # [N m/rad] position stiffness
-    k_d: float = 0.0  # [N m s/rad] velocity damping
-    k_i: float = 0.0  # [1/s] torque integral gain (paper: 0)
-    integral_limit: float = 10.0  # [N m] anti-windup clamp of |k_i * integral(e_tau)|
-    k_iq: float = 0.0  # [1/s] position-integral rate, 1 / integral time (not in the paper; position_integral.py)
-    position_integral_limit: float = 0.001  # [rad] clamp of the position integral
+    k_p: float = setting(2.0, unit="-", min=0)  # torque proportional gain (paper: 2)
+    k_s: float = setting(0.0, unit="N m/rad", min=0)  # position stiffness
+    k_d: float = setting(0.0, unit="N m s/rad", min=0)  # velocity damping
+    k_i: float = setting(0.0, unit="1/s", min=0)  # torque integral gain (paper: 0)
+    integral_limit: float = setting(10.0, unit="N m", min=0)  # anti-windup clamp of |k_i * integral(e_tau)|
+    k_iq: float = setting(0.0, unit="1/s", min=0)  # position-integral rate, 1 / integral time (position_integral.py)
+    position_integral_limit: float = setting(0.001, unit="rad", min=0)  # clamp of the position integral
 
     def __post_init__(self):
-        units = {"k_p": "-", "k_s": "N m/rad", "k_d": "N m s/rad", "k_i": "1/s", "integral_limit": "N m",
-                 "k_iq": "1/s", "position_integral_limit": "rad"}
-        for name, unit in units.items():
-            value = _finite(f"JointGains.{name}", getattr(self, name), lambda v: v >= 0,
-                            f"a finite number >= 0 [{unit}]")
-            object.__setattr__(self, name, value)
+        check_settings(self, ControlError)
+
+
+K7_SCALINGS = ("constant", "inverse_sqrt_k6")
+"""``k7_scaling``: ``constant`` uses k7 (k_d) as given; ``inverse_sqrt_k6`` divides it by sqrt(K6), so the given
+k7 is the value at K6 = 1 and lower stiffnesses get more velocity feedback (docs/control.md: the measured
+stability window of k7 moves up as K6 falls)."""
+
+
+@dataclass(frozen=True)
+class ServoGains:
+    """The keys of ``[defaults]`` and ``[joints.<name>]`` in the servo's terms, converted to :class:`JointGains`'
+    ``k_s`` and ``k_d``: ``k6 = K_tau (1 + K_p) K_s``, ``k7 = K_tau (1 + K_p) K_d`` (either form, not both)."""
+
+    k6: float | None = setting(None, unit="-, 1 = the native servo", min=0)
+    k7: float | None = setting(None, unit="s", min=0)
+    k7_scaling: str = setting("constant", choices=K7_SCALINGS)
 
 
 @dataclass(frozen=True)
@@ -76,29 +79,19 @@ class ForceTask:
     are regulated; the other axes of that wrench enter the feedforward as measured.
     """
 
-    sensor: str = "right_ankle"
-    frame: str = "ft_right_ankle"
-    axes: tuple[str, ...] = AXES
-    k_f: tuple[float, ...] = (1.0,) * 6  # [-] per axis (paper: 1)
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # [m] task point in ``frame``
+    sensor: str = setting("right_ankle", choices=FT_SENSOR_NAMES)
+    frame: str = setting("ft_right_ankle")
+    axes: tuple[str, ...] = setting(AXES)
+    k_f: tuple[float, ...] = setting((1.0,) * 6, unit="-", min=0)  # per axis (paper: 1)
+    offset: tuple[float, float, float] = setting((0.0, 0.0, 0.0), unit="m")  # task point in ``frame``
 
     def __post_init__(self):
-        if self.sensor not in FT_SENSOR_NAMES:
-            raise ControlError(f"ForceTask.sensor = {self.sensor!r}: expected one of {list(FT_SENSOR_NAMES)}")
         axes = tuple(self.axes)
         if not axes or len(set(axes)) != len(axes) or any(a not in AXES for a in axes):
             raise ControlError(f"ForceTask.axes = {self.axes!r}: expected distinct names among {list(AXES)}")
-        k_f = tuple(self.k_f)
-        if len(k_f) != len(axes):
+        check_settings(self, ControlError)
+        if len(self.k_f) != len(self.axes):
             raise ControlError(f"ForceTask.k_f = {self.k_f!r}: expected {len(axes)} values, one per axis {axes}")
-        k_f = tuple(_finite("ForceTask.k_f", v, lambda v: v >= 0, "finite numbers >= 0 [-]") for v in k_f)
-        offset = tuple(self.offset)
-        if len(offset) != 3:
-            raise ControlError(f"ForceTask.offset = {self.offset!r}: expected 3 numbers [m]")
-        offset = tuple(_finite("ForceTask.offset", v, lambda v: True, "finite numbers [m]") for v in offset)
-        object.__setattr__(self, "axes", axes)
-        object.__setattr__(self, "k_f", k_f)
-        object.__setattr__(self, "offset", offset)
 
     @property
     def axis_index(self) -> np.ndarray:
@@ -113,7 +106,7 @@ class SafetyLimits:
     max_command_error: np.ndarray  # [rad] |q_des - q| (the robot cuts its servos at 0.1 rad)
     max_torque: np.ndarray  # [N m] |tau_hat|
     max_velocity: np.ndarray  # [rad/s] |dq_hat|
-    joint_limit_margin: float = 0.02  # [rad] q must stay in [q_min + margin, q_max - margin]
+    joint_limit_margin: float = setting(0.02, unit="rad", min=0)  # q must stay in [q_min + margin, q_max - margin]
 
     def __post_init__(self):
         n = None
@@ -124,14 +117,31 @@ class SafetyLimits:
                 raise ControlError(f"SafetyLimits.{name} = {arr.tolist()}: expected {n} finite numbers > 0 [{unit}]")
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
-        object.__setattr__(self, "joint_limit_margin", _finite(
-            "SafetyLimits.joint_limit_margin", self.joint_limit_margin, lambda v: v >= 0, "a finite number >= 0 [rad]"))
+        check_settings(self, ControlError)
 
     @classmethod
-    def uniform(cls, n: int, max_command_error: float = 0.05, max_torque: float = 300.0, max_velocity: float = 5.0,
-                joint_limit_margin: float = 0.02) -> SafetyLimits:
-        """The same limits for all ``n`` joints."""
-        return cls(np.full(n, max_command_error), np.full(n, max_torque), np.full(n, max_velocity), joint_limit_margin)
+    def uniform(cls, n: int, **limits: float) -> SafetyLimits:
+        """The same limits for all ``n`` joints: ``limits`` overrides the fields of :class:`JointLimits` and
+        ``joint_limit_margin``, the others take their defaults."""
+        margin = limits.pop("joint_limit_margin", cls.joint_limit_margin)
+        values = {f.name: limits.pop(f.name, f.default) for f in fields(JointLimits)}
+        if limits:
+            raise ControlError(f"SafetyLimits.uniform: unknown limits {sorted(limits)}: expected among "
+                               f"{[f.name for f in fields(JointLimits)]}")
+        return cls(**{k: np.full(n, v) for k, v in values.items()}, joint_limit_margin=margin)
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """The limits of :class:`SafetyLimits` for one joint: ``[safety]`` (every joint) and
+    ``[safety.joints.<name>]`` (its overrides)."""
+
+    max_command_error: float = setting(0.05, unit="rad", min=0, strict_min=True)
+    max_torque: float = setting(300.0, unit="N m", min=0, strict_min=True)
+    max_velocity: float = setting(5.0, unit="rad/s", min=0, strict_min=True)
+
+    def __post_init__(self):
+        check_settings(self, ControlError)
 
 
 @dataclass(frozen=True)
@@ -142,17 +152,18 @@ class ControlConfig:
     gains: Mapping[str, JointGains]  # torque-controlled joints (the others stay position-controlled)
     motors: Mapping[str, MotorModel]  # identified actuator model of each torque-controlled joint
     safety: SafetyLimits
-    base: str = "fixed"
-    contacts: tuple[str, ...] = ()  # F/T sensors whose measured wrench enters the feedforward (-J^T f_hat)
+    base: str = setting("fixed", choices=BASES)
+    contacts: tuple[str, ...] = setting(())  # F/T sensors whose measured wrench enters the feedforward (-J^T f_hat)
     force: ForceTask | None = None
-    sign_velocity: float = 0.01  # [rad/s] Coulomb sign smoothing: k_c tanh(dq / sign_velocity)
-    fade_time: float = 0.5  # [s] the bumpless-switch offset fades to zero over this time
-    velocity_feedforward: str = "estimate"  # velocity of the motor-model feedforward (VELOCITY_FEEDFORWARDS)
-    rest_velocity: float = 0.001  # [rad/s] the position integral runs on a joint while |dq_d| < rest_velocity
+    sign_velocity: float = setting(0.01, unit="rad/s", min=0, strict_min=True)  # Coulomb: k_c tanh(dq / this)
+    fade_time: float = setting(0.5, unit="s", min=0)  # the bumpless-switch offset fades to zero over this time
+    velocity_feedforward: str = setting("estimate", choices=VELOCITY_FEEDFORWARDS)  # velocity the feedforward reads
+    rest_velocity: float = setting(0.001, unit="rad/s", min=0, strict_min=True)  # position integral while |dq_d| <
     source: str = "<direct>"  # file the config came from
     _torque_mask: np.ndarray = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
+        check_settings(self, ControlError)
         names = tuple(self.joint_names)
         object.__setattr__(self, "joint_names", names)
         # MotorParameters.__getitem__ raises IdentificationError, not KeyError, so `in` fails on it: use its dict.
@@ -172,11 +183,6 @@ class ControlConfig:
         object.__setattr__(self, "motors", MappingProxyType({j: self.motors[j] for j in gains}))
         if not isinstance(self.safety, SafetyLimits) or self.safety.max_torque.size != len(names):
             raise ControlError(f"safety = {self.safety!r}: expected SafetyLimits for {len(names)} joints")
-        if self.base not in BASES:
-            raise ControlError(f"base = {self.base!r}: expected one of {list(BASES)}")
-        if self.velocity_feedforward not in VELOCITY_FEEDFORWARDS:
-            raise ControlError(f"velocity_feedforward = {self.velocity_feedforward!r}: expected one of "
-                               f"{list(VELOCITY_FEEDFORWARDS)}")
         contacts = tuple(self.contacts)
         for c in contacts:
             if c not in FT_SENSOR_NAMES:
@@ -186,12 +192,6 @@ class ControlConfig:
         object.__setattr__(self, "contacts", contacts)
         if self.force is not None and not isinstance(self.force, ForceTask):
             raise ControlError(f"force = {self.force!r}: expected a ForceTask or None")
-        object.__setattr__(self, "sign_velocity", _finite("sign_velocity", self.sign_velocity, lambda v: v > 0,
-                                                          "a finite number > 0 [rad/s]"))
-        object.__setattr__(self, "fade_time", _finite("fade_time", self.fade_time, lambda v: v >= 0,
-                                                      "a finite number >= 0 [s]"))
-        object.__setattr__(self, "rest_velocity", _finite("rest_velocity", self.rest_velocity, lambda v: v > 0,
-                                                          "a finite number > 0 [rad/s]"))
         mask = np.array([j in gains for j in names])
         mask.setflags(write=False)
         object.__setattr__(self, "_torque_mask", mask)
@@ -232,8 +232,6 @@ class ControlConfig:
 
     @classmethod
     def from_section(cls, root: Section, info: RobotInfo) -> ControlConfig:
-        root.check_keys(["version", "motors", "base", "contacts", "sign_velocity", "fade_time", "velocity_feedforward",
-                         "rest_velocity", "torque_joints", "defaults", "joints", "force", "safety"])
         version = root.int("version")
         if version != FORMAT_VERSION:
             raise root.error("version", version, f"{FORMAT_VERSION}")
@@ -258,56 +256,23 @@ class ControlConfig:
             raise root.error("torque_joints", torque_joints, "distinct joint names")
 
         defaults = root.section("defaults", {})
-        gain_keys = ["k_p", "k_i", "integral_limit", "k_iq", "position_integral_limit", "k6", "k_s", "k7", "k_d",
-                     "k7_scaling"]
-        defaults.check_keys(gain_keys)
         joints = root.section("joints", {})
         for j in joints.keys():
             if j not in torque_joints:
                 raise joints.error(j, joints.data[j], f"a table for a joint listed in torque_joints {torque_joints}")
-        gains = {}
-        for j in torque_joints:
-            own = joints.section(j, {})
-            own.check_keys(gain_keys)
-            gains[j] = _joint_gains(own, defaults, motors[j].k_tau)
-
-        force = None
-        if "force" in root:
-            fs = root.section("force")
-            fs.check_keys(["sensor", "frame", "axes", "k_f", "offset"])
-            axes = fs.data.get("axes", list(AXES))
-            if (not isinstance(axes, list) or not axes or len(set(axes)) != len(axes)
-                    or any(a not in AXES for a in axes)):
-                raise fs.error("axes", axes, f"a list of distinct axes among {list(AXES)}")
-            k_f = fs.floats("k_f", len(axes), unit="-")
-            if any(v < 0 for v in k_f):
-                raise fs.error("k_f", k_f, f"a list of {len(axes)} finite numbers >= 0 [-]")
-            force = ForceTask(
-                sensor=fs.str("sensor", choices=FT_SENSOR_NAMES),
-                frame=fs.str("frame"),
-                axes=tuple(axes),
-                k_f=tuple(k_f),
-                offset=tuple(fs.floats("offset", 3, [0.0, 0.0, 0.0], unit="m")),
-            )
+        base = _gain_tables(defaults)
+        gains = {j: _joint_gains(joints.section(j, {}), defaults, base, motors[j].k_tau) for j in torque_joints}
+        force = _force(root.section("force")) if "force" in root else None
 
         contacts = root.data.get("contacts", [])
         if (not isinstance(contacts, list) or len(set(map(str, contacts))) != len(contacts)
                 or any(c not in FT_SENSOR_NAMES for c in contacts)):
             raise root.error("contacts", contacts, f"a list of distinct F/T sensors among {list(FT_SENSOR_NAMES)}")
 
-        return cls(
-            joint_names=names,
-            gains=gains,
-            motors={j: motors[j] for j in torque_joints},
-            safety=_safety(root.section("safety", {}), info),
-            base=root.str("base", "fixed", choices=BASES),
-            contacts=tuple(contacts),
-            force=force,
-            sign_velocity=root.float("sign_velocity", 0.01, min=0.0, strict_min=True, unit="rad/s"),
-            fade_time=root.float("fade_time", 0.5, min=0.0, unit="s"),
-            velocity_feedforward=root.str("velocity_feedforward", "estimate", choices=VELOCITY_FEEDFORWARDS),
-            rest_velocity=root.float("rest_velocity", 0.001, min=0.0, strict_min=True, unit="rad/s"),
-            source=root.file,
+        return load_dataclass(
+            cls, root, ignore=["version", "motors", "torque_joints", "defaults", "joints", "force", "safety"],
+            joint_names=names, gains=gains, motors={j: motors[j] for j in torque_joints},
+            safety=_safety(root.section("safety", {}), info), force=force, source=root.file,
         )
 
 
@@ -332,72 +297,67 @@ def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: flo
                                   f"expected the shape parameters of effect '{name}'") from err
 
 
-K7_SCALINGS = ("constant", "inverse_sqrt_k6")
-"""``k7_scaling``: ``constant`` uses k7 (k_d) as given; ``inverse_sqrt_k6`` divides it by sqrt(K6), so the given
-k7 is the value at K6 = 1 and lower stiffnesses get more velocity feedback (docs/control.md: the measured
-stability window of k7 moves up as K6 falls)."""
+_GAIN_KEYS = tuple(f.name for f in fields(JointGains))
+_SERVO_KEYS = tuple(f.name for f in fields(ServoGains))
 
 
-def _joint_gains(own: Section, defaults: Section, k_tau: float) -> JointGains:
+def _gain_tables(sec: Section, base: tuple[JointGains, ServoGains] | None = None) -> tuple[JointGains, ServoGains]:
+    """The gains of a ``[defaults]`` or ``[joints.<name>]`` table (missing keys: ``base``, else the defaults),
+    k6/k7 not yet converted."""
+    for a, b in (("k6", "k_s"), ("k7", "k_d")):
+        if a in sec and b in sec:
+            raise sec.error(b, sec.data[b], f"either {a} or {b}, not both")
+    gains = load_dataclass(JointGains, sec, ignore=_SERVO_KEYS, base=base and base[0])
+    return gains, load_dataclass(ServoGains, sec, ignore=_GAIN_KEYS, base=base and base[1])
+
+
+def _joint_gains(own: Section, defaults: Section, base: tuple[JointGains, ServoGains], k_tau: float) -> JointGains:
     """Gains of one joint: its own table first, then [defaults]; k6/k7 are converted to k_s/k_d, and k_d is
     divided by sqrt(K6) with ``k7_scaling = "inverse_sqrt_k6"``."""
+    gains, servo = _gain_tables(own, base)
 
-    def pick(key: str) -> Section | None:
-        return own if key in own else defaults if key in defaults else None
-
-    def value(key: str, default: float, unit: str) -> float:
-        sec = pick(key)
-        return default if sec is None else sec.float(key, min=0.0, unit=unit)
-
-    k_p = value("k_p", 2.0, "-")
-    for sec in (own, defaults):
-        for a, b in (("k6", "k_s"), ("k7", "k_d")):
-            if a in sec and b in sec:
-                raise sec.error(b, sec.data[b], f"either {a} or {b}, not both")
-
-    def stiffness(native: str, si: str, unit: str, convert) -> float:
+    def native_form(native: str, si: str) -> bool:
         # The joint's own table wins over [defaults], whichever of the two forms each uses.
-        for sec in (own, defaults):
-            if native in sec:
-                return float(convert(k_tau, k_p, sec.float(native, min=0.0, unit=unit_native[native]))[0])
-            if si in sec:
-                return sec.float(si, min=0.0, unit=unit)
-        return 0.0
+        return next((native in sec for sec in (own, defaults) if native in sec or si in sec), False)
 
-    unit_native = {"k6": "-, 1 = the native servo", "k7": "s"}
-    k_s = stiffness("k6", "k_s", "N m/rad", ks_from_k6)
-    k_d = stiffness("k7", "k_d", "N m s/rad", kd_from_k7)
-    sec = pick("k7_scaling")
-    scaling = "constant" if sec is None else sec.str("k7_scaling", choices=K7_SCALINGS)
-    if scaling == "inverse_sqrt_k6":
-        k6 = k_tau * (1.0 + k_p) * k_s
+    k_s, k_d = gains.k_s, gains.k_d
+    if native_form("k6", "k_s"):
+        k_s = float(ks_from_k6(k_tau, gains.k_p, servo.k6)[0])
+    if native_form("k7", "k_d"):
+        k_d = float(kd_from_k7(k_tau, gains.k_p, servo.k7)[0])
+    if servo.k7_scaling == "inverse_sqrt_k6":
+        k6 = k_tau * (1.0 + gains.k_p) * k_s
         if not k6 > 0:
-            raise sec.error("k7_scaling", scaling, "'constant' for a joint without position gain (k6 = 0)")
+            sec = own if "k7_scaling" in own else defaults
+            raise sec.error("k7_scaling", servo.k7_scaling, "'constant' for a joint without position gain (k6 = 0)")
         k_d /= math.sqrt(k6)
-    return JointGains(
-        k_p=k_p,
-        k_s=k_s,
-        k_d=k_d,
-        k_i=value("k_i", 0.0, "1/s"),
-        integral_limit=value("integral_limit", 10.0, "N m"),
-        k_iq=value("k_iq", 0.0, "1/s"),
-        position_integral_limit=value("position_integral_limit", 0.001, "rad"),
-    )
+    return replace(gains, k_s=k_s, k_d=k_d)
+
+
+def _force(fs: Section) -> ForceTask:
+    """``[force]``: sensor, frame and k_f are required in the file; axes must be distinct, one k_f per axis."""
+    axes = fs.data.get("axes", list(AXES))
+    if not isinstance(axes, list) or not axes or len(set(axes)) != len(axes) or any(a not in AXES for a in axes):
+        raise fs.error("axes", axes, f"a list of distinct axes among {list(AXES)}")
+    k_f = f"a list of {len(axes)} finite numbers [-]"
+    for key, expected in (("k_f", k_f), ("sensor", f"one of {list(FT_SENSOR_NAMES)}"), ("frame", "a string")):
+        if key not in fs:
+            raise fs.missing(key, expected)
+    if not isinstance(fs.data["k_f"], list) or len(fs.data["k_f"]) != len(axes):
+        raise fs.error("k_f", fs.data["k_f"], k_f)
+    return load_dataclass(ForceTask, fs)
 
 
 def _safety(sec: Section, info: RobotInfo) -> SafetyLimits:
-    keys = {"max_command_error": ("rad", 0.05), "max_torque": ("N m", 300.0), "max_velocity": ("rad/s", 5.0)}
-    sec.check_keys([*keys, "joint_limit_margin", "joints"])
-    n = info.nq
-    arrays = {k: np.full(n, sec.float(k, d, min=0.0, strict_min=True, unit=u)) for k, (u, d) in keys.items()}
+    """``[safety]``: the limits of every joint, ``[safety.joints.<name>]`` overrides, joint_limit_margin."""
+    limits = load_dataclass(JointLimits, sec, ignore=["joint_limit_margin", "joints"])
+    arrays = {f.name: np.full(info.nq, getattr(limits, f.name)) for f in fields(JointLimits)}
     per_joint = sec.section("joints", {})
     for j in per_joint.keys():
         if j not in info.joint_names:
             raise per_joint.error(j, per_joint.data[j], f"a table named after a joint of {info.name}, "
                                                         f"among {list(info.joint_names)}")
-        js = per_joint.section(j)
-        js.check_keys(list(keys))
-        for k, (u, _) in keys.items():
-            if k in js:
-                arrays[k][info.joint_index(j)] = js.float(k, min=0.0, strict_min=True, unit=u)
-    return SafetyLimits(**arrays, joint_limit_margin=sec.float("joint_limit_margin", 0.02, min=0.0, unit="rad"))
+        own = load_dataclass(JointLimits, per_joint.section(j), base=limits)
+        for k in arrays:
+            arrays[k][info.joint_index(j)] = getattr(own, k)
+    return load_dataclass(SafetyLimits, sec, ignore=[*arrays, "joints"], **arrays)

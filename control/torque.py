@@ -41,7 +41,7 @@ class JointTorqueController:
     """Eq. 10-11 vectorised over the joints, without allocation per tick."""
 
     def __init__(self, joint_names: Sequence[str], motors: Mapping[str, MotorModel], gains: Mapping[str, JointGains],
-                 period: float, sign_velocity: float = 0.01):
+                 period: float, sign_velocity: float = ControlConfig.sign_velocity):
         """
         Args:
             joint_names: All joints, RobotInfo order.

@@ -14,7 +14,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from servotau.config import Section, load_toml
+from servotau.config import Section, load_dataclass, load_toml, setting
+
+PROFILES = ("constant", "ramp", "sine")
+"""Push profiles: constant, ramp (0 -> peak -> 0, triangular) or sine."""
 
 
 @dataclass(frozen=True)
@@ -22,13 +25,14 @@ class OperatorPush:
     """A scripted external wrench on one body, in the world frame, applied at the body's centre of
     mass (the paper's hand pushes that load the joints for high-torque identification data)."""
 
-    body: str
-    start: float  # [s] sim time
-    duration: float  # [s]
-    force: np.ndarray  # [N] (3,) world frame (peak value for "ramp" and "sine")
-    torque: np.ndarray  # [N m] (3,) world frame
-    profile: str = "constant"  # "constant", "ramp" (0 -> peak -> 0, triangular) or "sine"
-    frequency: float = 0.5  # [Hz] for "sine"
+    body: str = setting()
+    start: float = setting(unit="s", min=0)  # sim time
+    duration: float = setting(unit="s", min=0, strict_min=True)
+    force: np.ndarray = setting(unit="N", shape=(3,), factory=lambda: np.zeros(3))  # world frame (the peak value
+    # for "ramp" and "sine")
+    torque: np.ndarray = setting(unit="N m", shape=(3,), factory=lambda: np.zeros(3))  # world frame
+    profile: str = setting("constant", choices=PROFILES)
+    frequency: float = setting(0.5, unit="Hz", min=0, strict_min=True)  # for "sine"
 
     def scale(self, t: float) -> float:
         """Profile value in [-1, 1] at sim time ``t`` [s] (0 outside the push)."""
@@ -43,55 +47,31 @@ class OperatorPush:
 
     @classmethod
     def from_section(cls, sec: Section) -> OperatorPush:
-        sec.check_keys(["body", "start", "duration", "force", "torque", "profile", "frequency"])
-        return cls(
-            body=sec.str("body"),
-            start=sec.float("start", min=0.0, unit="s"),
-            duration=sec.float("duration", min=0.0, strict_min=True, unit="s"),
-            force=np.array(sec.floats("force", 3, [0.0, 0.0, 0.0], unit="N")),
-            torque=np.array(sec.floats("torque", 3, [0.0, 0.0, 0.0], unit="N m")),
-            profile=sec.str("profile", "constant", choices=("constant", "ramp", "sine")),
-            frequency=sec.float("frequency", 0.5, min=0.0, strict_min=True, unit="Hz"),
-        )
+        return load_dataclass(cls, sec)
 
 
 @dataclass(frozen=True)
 class Scenario:
-    name: str
-    initial_posture: str = "half_sitting"  # a keyframe of the model
-    base_height: float = 0.648702  # [m] initial waist height
-    floor: bool = True
-    lift: bool = False  # two strings from anchors above the shoulders
-    string_length: float = 0.6  # [m] anchor to shoulder at the initial posture
-    string_slack: float = 0.0  # [m] extra length: > 0 leaves the strings slack (safety strings)
-    string_damping: float = 200.0  # [N s/m]
-    base_damping: float = 0.0  # [N m s/rad] on the base rotation
-    block_height: float = 0.0  # [m] 0: no block; else a rigid block under the right foot
-    operator: tuple[OperatorPush, ...] = ()
+    name: str = setting()
+    initial_posture: str = setting("half_sitting")  # a keyframe of the model
+    base_height: float = setting(0.648702, unit="m", min=0, max=3)  # initial waist height
+    floor: bool = setting(True)
+    lift: bool = setting(False)  # two strings from anchors above the shoulders
+    string_length: float = setting(0.6, unit="m", min=0.05, max=5)  # anchor to shoulder at the initial posture
+    string_slack: float = setting(0.0, unit="m", min=0, max=1)  # extra length: > 0 leaves the strings slack
+    string_damping: float = setting(200.0, unit="N s/m", min=0)
+    base_damping: float = setting(0.0, unit="N m s/rad", min=0)  # on the base rotation
+    block_height: float = setting(0.0, unit="m", min=0, max=0.2)  # 0: no block; else a block under the right foot
+    operator: tuple[OperatorPush, ...] = ()  # [[operator]] tables
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Scenario:
         root = load_toml(path)
-        root.check_keys(["name", "initial_posture", "base_height", "floor", "lift", "string_length",
-                         "string_slack", "string_damping", "base_damping", "block_height", "operator"])
         raw_ops = root.data.get("operator", [])
         if not isinstance(raw_ops, list) or not all(isinstance(o, dict) for o in raw_ops):
             raise root.error("operator", raw_ops, "an array of tables [[operator]]")
-        return cls(
-            name=root.str("name"),
-            initial_posture=root.str("initial_posture", "half_sitting"),
-            base_height=root.float("base_height", 0.648702, min=0.0, max=3.0, unit="m"),
-            floor=root.bool("floor", True),
-            lift=root.bool("lift", False),
-            string_length=root.float("string_length", 0.6, min=0.05, max=5.0, unit="m"),
-            string_slack=root.float("string_slack", 0.0, min=0.0, max=1.0, unit="m"),
-            string_damping=root.float("string_damping", 200.0, min=0.0, unit="N s/m"),
-            base_damping=root.float("base_damping", 0.0, min=0.0, unit="N m s/rad"),
-            block_height=root.float("block_height", 0.0, min=0.0, max=0.2, unit="m"),
-            operator=tuple(
-                OperatorPush.from_section(Section(o, root.file, f"operator[{i}]")) for i, o in enumerate(raw_ops)
-            ),
-        )
+        ops = tuple(OperatorPush.from_section(Section(o, root.file, f"operator[{i}]")) for i, o in enumerate(raw_ops))
+        return load_dataclass(cls, root, ignore=["operator"], operator=ops)
 
 
 def bend_right_leg_for_block(qpos_leg: np.ndarray, height: float, thigh: float = 0.30, shin: float = 0.30) -> None:

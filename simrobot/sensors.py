@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from servotau.config import Section, load_toml
+from servotau.config import Section, load_dataclass, load_toml, read_setting, setting
 from servotau.hal.types import (
     FT_SENSOR_NAMES,
     STATUS_INVALID,
@@ -24,62 +24,53 @@ class SensorFault:
     """A scripted sensor fault: ``sensor`` (one of STATUS_NAMES) gives ``kind`` ("nan" or "stale")
     readings from ``start`` for ``duration`` seconds of sim time."""
 
-    sensor: str
-    kind: str
-    start: float  # [s]
-    duration: float  # [s]
+    sensor: str = setting(choices=STATUS_NAMES)
+    kind: str = setting(choices=("nan", "stale"))
+    start: float = setting(unit="s", min=0)
+    duration: float = setting(unit="s", min=0)
 
 
 @dataclass(frozen=True)
 class SensorConfig:
-    encoder_resolution: float  # [rad]
-    gyro_noise: float  # [rad/s]
-    gyro_bias: np.ndarray  # [rad/s] (3,)
-    accel_noise: float  # [m/s^2]
-    accel_bias: np.ndarray  # [m/s^2] (3,)
-    force_noise: float  # [N]
-    torque_noise: float  # [N m]
-    offset_scale: np.ndarray  # [N, N m] (2,)
-    ranges: np.ndarray  # [N, N m] (4, 6) per F/T sensor
+    encoder_resolution: float = setting(unit="rad", min=0)
+    gyro_noise: float = setting(unit="rad/s", min=0)
+    gyro_bias: np.ndarray = setting(unit="rad/s", shape=(3,))
+    accel_noise: float = setting(unit="m/s^2", min=0)
+    accel_bias: np.ndarray = setting(unit="m/s^2", shape=(3,))
+    force_noise: float = setting(unit="N", min=0)
+    torque_noise: float = setting(unit="N m", min=0)
+    offset_scale: np.ndarray = setting(unit="N, N m", shape=(2,))
+    ranges: np.ndarray = setting(unit="N, N m", shape=(len(FT_SENSOR_NAMES), 6))  # per F/T sensor
     faults: tuple[SensorFault, ...] = ()
 
     @classmethod
     def from_toml(cls, path: str | Path) -> SensorConfig:
+        """Read a sensors file: ``[encoders]``, ``[imu]``, ``[ft]`` (keys: :data:`TABLES`, and the ranges
+        of the ankle and wrist F/T sensors) and ``[[faults]]``."""
         root = load_toml(path)
-        root.check_keys(["encoders", "imu", "ft", "faults"])
-        enc, imu, ft = root.section("encoders"), root.section("imu"), root.section("ft")
-        enc.check_keys(["resolution"])
-        imu.check_keys(["gyro_noise", "gyro_bias", "accel_noise", "accel_bias"])
-        ft.check_keys(["force_noise", "torque_noise", "offset_scale", "ankle_range", "wrist_range"])
+        root.check_keys([*TABLES, "faults"])
+        values = {}
+        for table, keys in TABLES.items():
+            sec = root.section(table)
+            sec.check_keys([*keys, *(("ankle_range", "wrist_range") if table == "ft" else ())])
+            values.update({field_: read_setting(cls, field_, sec, key) for key, field_ in keys.items()})
+        ft = root.section("ft")
         ankle = ft.floats("ankle_range", 6, unit="N, N m")
         wrist = ft.floats("wrist_range", 6, unit="N, N m")
         raw_faults = root.data.get("faults", [])
         if not isinstance(raw_faults, list) or not all(isinstance(f, dict) for f in raw_faults):
             raise root.error("faults", raw_faults, "an array of tables [[faults]]")
-        faults = []
-        for i, raw in enumerate(raw_faults):
-            sec = Section(raw, root.file, f"faults[{i}]")
-            sec.check_keys(["sensor", "kind", "start", "duration"])
-            faults.append(
-                SensorFault(
-                    sensor=sec.str("sensor", choices=STATUS_NAMES),
-                    kind=sec.str("kind", choices=("nan", "stale")),
-                    start=sec.float("start", min=0.0, unit="s"),
-                    duration=sec.float("duration", min=0.0, unit="s"),
-                )
-            )
-        return cls(
-            encoder_resolution=enc.float("resolution", min=0.0, unit="rad"),
-            gyro_noise=imu.float("gyro_noise", min=0.0, unit="rad/s"),
-            gyro_bias=np.array(imu.floats("gyro_bias", 3, unit="rad/s")),
-            accel_noise=imu.float("accel_noise", min=0.0, unit="m/s^2"),
-            accel_bias=np.array(imu.floats("accel_bias", 3, unit="m/s^2")),
-            force_noise=ft.float("force_noise", min=0.0, unit="N"),
-            torque_noise=ft.float("torque_noise", min=0.0, unit="N m"),
-            offset_scale=np.array(ft.floats("offset_scale", 2, unit="N, N m")),
-            ranges=np.array([ankle, ankle, wrist, wrist]),
-            faults=tuple(faults),
-        )
+        faults = [load_dataclass(SensorFault, Section(raw, root.file, f"faults[{i}]"))
+                  for i, raw in enumerate(raw_faults)]
+        return cls(**values, ranges=np.array([ankle, ankle, wrist, wrist]), faults=tuple(faults))
+
+
+TABLES = {
+    "encoders": {"resolution": "encoder_resolution"},
+    "imu": {k: k for k in ("gyro_noise", "gyro_bias", "accel_noise", "accel_bias")},
+    "ft": {k: k for k in ("force_noise", "torque_noise", "offset_scale")},
+}
+"""The tables of a sensors file: key -> field of :class:`SensorConfig`."""
 
 
 class SensorModel:

@@ -20,7 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from servotau.config import CONFIG_DIR, load_toml, resolve_config_path
+from servotau.config import CONFIG_DIR, load_dataclass, load_toml, resolve_config_path, setting
 from servotau.description import FT_FRAMES, FT_SENSOR_NAMES, JOINT_NAMES, MODEL_PATH, ROOT_JOINT
 from servotau.errors import ConfigError
 from servotau.hal.types import GroundTruth, RobotInfo, SensorFrame
@@ -32,6 +32,8 @@ from .servo import Servo
 from .servo_config import load_servo_params
 
 FLEX_SUBSTEPS = 4  # sub-steps per tick when a joint has an elastic gear or backlash
+DEFAULT_SCENARIO = "scenarios/hanging.toml"
+"""The scenario of a sim file without ``scenario`` (relative to config/)."""
 
 
 @dataclass(frozen=True)
@@ -42,22 +44,21 @@ class SimConfig:
     servo_path: Path = CONFIG_DIR / "servo.toml"
     sensors: SensorConfig = field(default_factory=lambda: SensorConfig.from_toml(CONFIG_DIR / "sensors.toml"))
     model_path: Path = MODEL_PATH
-    seed: int = 0
+    seed: int = setting(0, min=0)
     effects: dict | None = None  # overrides servo.toml's [effects] table
 
     @classmethod
     def from_toml(cls, path: str | Path) -> SimConfig:
-        """Read a sim file: ``scenario``, ``servo``, ``sensors`` (paths) and ``seed``."""
+        """Read a sim file: ``scenario``, ``servo``, ``sensors`` (paths relative to config/, each optional),
+        ``seed`` and ``effects``."""
         root = load_toml(path)
-        root.check_keys(["scenario", "servo", "sensors", "seed", "effects"])
-        scenario = Scenario.from_toml(resolve_config_path(root.str("scenario", "scenarios/hanging.toml")))
-        return cls(
-            scenario=scenario,
-            servo_path=resolve_config_path(root.str("servo", "servo.toml")),
-            sensors=SensorConfig.from_toml(resolve_config_path(root.str("sensors", "sensors.toml"))),
-            seed=root.int("seed", 0, min=0),
-            effects=dict(root.section("effects", {}).data) or None,
-        )
+        files = {"servo": "servo_path", "sensors": "sensors"}
+        given = {field_: resolve_config_path(root.str(key)) for key, field_ in files.items() if key in root}
+        if "sensors" in given:
+            given["sensors"] = SensorConfig.from_toml(given["sensors"])
+        scenario = Scenario.from_toml(resolve_config_path(root.str("scenario", DEFAULT_SCENARIO)))
+        return load_dataclass(cls, root, ignore=["scenario", *files, "effects"], scenario=scenario,
+                              effects=dict(root.section("effects", {}).data) or None, **given)
 
     @classmethod
     def named(cls, scenario: str, **kwargs) -> SimConfig:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import pytest
 
 from servotau.config import Section, check_settings, load_dataclass, setting
@@ -93,3 +94,81 @@ def test_post_init_errors_are_reported_with_the_file():
 
     with pytest.raises(ConfigError, match=r"cfg.toml \[ctl\]: Ordered.high = 0.0: expected > low = 1.0"):
         load_dataclass(Ordered, _section({"low": 1.0, "high": 0.0}))
+
+
+@dataclass(frozen=True)
+class _Window:
+    window: int = setting(80, min="order + 2")
+    order: int = setting(2, min=0)
+    hold: float = setting(0.05, unit="s", min=0, strict_min=True)
+    off: float = setting(1.0, unit="s", min="hold", strict_min=True)
+
+    def __post_init__(self):
+        check_settings(self, ControlError)
+
+
+def test_a_bound_may_name_another_field():
+    """``min="order + 2"`` bounds a field by another one (given or default); the message shows both."""
+    assert load_dataclass(_Window, _section({"window": 4})) == _Window(4, 2)
+    with pytest.raises(ConfigError, match=r"field 'ctl.window' = 3: expected an integer >= order \+ 2 = 4$"):
+        load_dataclass(_Window, _section({"window": 3}))
+    with pytest.raises(ConfigError, match=r"field 'ctl.window' = 80: expected an integer >= order \+ 2 = 82"):
+        load_dataclass(_Window, _section({"order": 80}))
+    with pytest.raises(ConfigError, match=r"field 'ctl.off' = 1.0: expected a finite number > hold = 2 \[s\]"):
+        load_dataclass(_Window, _section({"hold": 2.0}))
+    with pytest.raises(ControlError, match=r"_Window.off = 0.01: expected a finite number > hold = 0.05 \[s\]"):
+        _Window(off=0.01)
+
+
+def test_base_instance_fills_missing_keys_and_nested_tables_start_from_the_field_default():
+    """``base`` supplies the missing keys; a nested table's missing keys keep the field default's values."""
+    assert load_dataclass(_Window, _section({"window": 10}), base=_Window(20, 3)) == _Window(10, 3)
+
+    @dataclass(frozen=True)
+    class Outer:
+        enc: _Window = setting(_Window(40, 3))
+
+    assert load_dataclass(Outer, _section({"enc": {"window": 30}})).enc == _Window(30, 3)
+
+
+@dataclass(frozen=True)
+class _Arrays:
+    bias: np.ndarray = setting(unit="rad/s", shape=(3,), factory=lambda: np.zeros(3))
+    ranges: np.ndarray = setting(unit="N", min=0, shape=(2, 2), factory=lambda: np.ones((2, 2)))
+
+    def __post_init__(self):
+        check_settings(self, ControlError)
+
+
+def test_arrays_of_a_given_shape():
+    """An ``np.ndarray`` field is read from (nested) lists of numbers of its shape, bounds per element."""
+    a = load_dataclass(_Arrays, _section({"bias": [1, 2, 3]}))
+    assert a.bias.tolist() == [1.0, 2.0, 3.0] and a.bias.dtype == float and a.ranges.tolist() == [[1, 1], [1, 1]]
+    with pytest.raises(ConfigError, match=r"'ctl.bias' = \[1, 2\]: expected a list of 3 finite numbers \[rad/s\]"):
+        load_dataclass(_Arrays, _section({"bias": [1, 2]}))
+    with pytest.raises(ConfigError, match=r"'ctl.bias' = \[1, True, 3\]: expected a list of 3 finite numbers"):
+        load_dataclass(_Arrays, _section({"bias": [1, True, 3]}))
+    with pytest.raises(ConfigError, match=r"'ctl.ranges' = \[\[1, -1\], \[1, 1\]\]: expected a 2 x 2 array of "
+                                          r"finite numbers >= 0 \[N\]"):
+        load_dataclass(_Arrays, _section({"ranges": [[1, -1], [1, 1]]}))
+    with pytest.raises(ControlError, match=r"_Arrays.bias = \[0.0, 0.0\]: expected a list of 3 finite numbers"):
+        _Arrays(bias=np.zeros(2))
+
+
+def test_numpy_scalars_are_numbers():
+    """numpy integers and floats pass as int and float (converted to the Python types)."""
+    w = _Window(np.int64(10), np.int64(2), np.float32(0.5), 2.0)
+    assert type(w.window) is int and w.window == 10 and type(w.hold) is float
+
+
+def test_read_setting_reads_one_field_under_another_key():
+    """``read_setting`` applies a field's type, bounds, unit and default to a key of another layout."""
+    from servotau.config import read_setting
+
+    sec = Section({"resolution": 2, "bad": -1}, "cfg.toml", "encoders")
+    assert read_setting(_Settings, "period", sec, "resolution") == 2.0
+    assert read_setting(_Settings, "count", sec, "missing") == 3
+    with pytest.raises(ConfigError, match=r"field 'encoders.bad' = -1: expected a finite number > 0 \[s\]"):
+        read_setting(_Settings, "period", sec, "bad")
+    with pytest.raises(ConfigError, match=r"field 'encoders.period' missing: expected a value > 0 \[s\]"):
+        read_setting(_Settings, "period", sec)

@@ -131,3 +131,30 @@ def test_direct_construction_is_validated(build, field):
     with pytest.raises(ControlError, match=field) as info:
         build()
     assert "expected" in str(info.value)
+
+
+def test_defaults_live_in_the_dataclass_fields():
+    """Fields absent from the file take the dataclasses' defaults; [safety.joints.X] overrides one joint."""
+    data = _with("safety.joints", {"HEAD_JOINT0": {"max_torque": 20.0}})
+    for key in ("sign_velocity", "fade_time", "velocity_feedforward", "rest_velocity"):
+        data.pop(key)
+    data["safety"].pop("max_velocity")
+    cfg = ControlConfig.from_mapping(data, INFO)
+    direct = ControlConfig(JOINT_NAMES, {}, {}, SafetyLimits.uniform(30))
+    for key in ("sign_velocity", "fade_time", "velocity_feedforward", "rest_velocity"):
+        assert getattr(cfg, key) == getattr(direct, key)
+    head = INFO.joint_index("HEAD_JOINT0")
+    assert cfg.safety.max_torque[head] == 20.0 and cfg.safety.max_torque[0] == BASE["safety"]["max_torque"]
+    assert (cfg.safety.max_velocity == direct.safety.max_velocity).all()
+    assert cfg.safety.max_command_error[head] == BASE["safety"]["max_command_error"]
+
+
+def test_force_table_requires_sensor_frame_and_gains():
+    """The [force] table names its sensor, frame and k_f (one per axis); offset and axes may be left out."""
+    task = {"sensor": "right_ankle", "frame": "ft_right_ankle", "k_f": [1.0] * 6}
+    assert ControlConfig.from_mapping(_with("force", task), INFO).force == ForceTask()
+    for key in task:
+        with pytest.raises(ConfigError, match=rf"ctl.toml: field 'force.{key}' missing: expected"):
+            ControlConfig.from_mapping(_with("force", {k: v for k, v in task.items() if k != key}), INFO, "ctl.toml")
+    with pytest.raises(ConfigError, match=r"field 'force.k_f' = \[1.0\]: expected a list of 6 finite numbers"):
+        ControlConfig.from_mapping(_with("force", {**task, "k_f": [1.0]}), INFO, "ctl.toml")

@@ -95,3 +95,25 @@ def test_prediction_reads_k_tau_and_k_v_from_the_motor_file(tmp_path):
     with pytest.raises(ConfigError, match="k_tau"):  # the motor parameters live only in config/motors/
         cfg("copy.toml", "[prediction.k_tau]\nRLEG_JOINT3 = 5e-5\n")
     assert not EstimatorConfig.from_toml().prediction.enabled
+
+
+def test_partial_tables_keep_the_dataclass_defaults(tmp_path):
+    """A [filters.X] table with one key keeps the other of the default filter; [low_delay] and
+    [model] take LowDelaySettings' and ModelPerturbation's defaults; errors name the dotted field."""
+    from servotau.estimation.config import LowDelaySettings
+
+    path = tmp_path / "est.toml"
+    path.write_text("[filters.imu]\nwindow = 40\n[low_delay]\nimu_order = 3\n")
+    cfg = EstimatorConfig.from_toml(path)
+    assert cfg.imu == FilterSettings(40, EstimatorConfig().imu.order) and cfg.encoders == EstimatorConfig().encoders
+    assert cfg.perturbation == ModelPerturbation()
+    low = EstimatorConfig.from_toml(path, variant="low_delay")
+    assert low.imu == FilterSettings(80, 3) and low.encoders.order == LowDelaySettings.encoders_order
+    path.write_text("[filters.imu]\norder = 79\n")
+    with pytest.raises(ConfigError, match=r"est.toml: field 'filters.imu.window' = 80: expected an integer >= "
+                                          r"order \+ 2 = 81"):
+        EstimatorConfig.from_toml(path)
+    path.write_text("[model]\ncom_offset_std = 0.6\n")
+    with pytest.raises(ConfigError, match=r"field 'model.com_offset_std' = 0.6: expected a finite number >= 0 "
+                                          r"<= 0.5 \[m\]"):
+        EstimatorConfig.from_toml(path)

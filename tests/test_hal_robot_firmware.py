@@ -97,3 +97,14 @@ def test_safety_config_validation():
         SafetyConfig.from_section(Section({"hold_after": -1}, "hal.toml", "safety"))
     s = SafetyConfig.from_section(Section({"hold_after": 0.02, "max_position_error": 0.2}, "x.toml", ""))
     assert s.hold_after == 0.02 and s.max_position_error == 0.2 and s.servo_off_after == 1.0
+
+
+def test_safety_config_bounds_name_the_other_field():
+    """servo_off_after must exceed hold_after (from the file or its default): the message names both."""
+    with pytest.raises(ConfigError, match=r"hal.toml: field 'safety.servo_off_after' = 1.0: expected a finite "
+                                          r"number > hold_after = 2 \[s\]"):
+        SafetyConfig.from_section(Section({"hold_after": 2.0}, "hal.toml", "safety"))
+    with pytest.raises(HalError, match=r"SafetyConfig.lockstep_servo_off_after = 0.5: expected a finite number > "
+                                       r"lockstep_hold_after = 1 \[s\]"):
+        SafetyConfig(lockstep_servo_off_after=0.5)
+    assert SafetyConfig.from_section(Section({}, "x.toml", "")) == SafetyConfig()

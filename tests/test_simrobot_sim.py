@@ -270,3 +270,37 @@ def test_bad_command_is_rejected_and_does_not_move_the_robot():
         with pytest.raises(ConfigError, match="q_des"):
             robot.step(cmd)
     assert robot.seq == seq and np.array_equal(robot.ground_truth().q, q)
+
+
+def test_scenario_operator_and_sim_files_take_the_dataclass_defaults(tmp_path):
+    """Keys left out take the dataclass defaults; an [[operator]] or [[faults]] error names its entry."""
+    p = tmp_path / "s.toml"
+    p.write_text('name = "x"\n[[operator]]\nbody = "RLEG_FOOT"\nstart = 1.0\nduration = 2.0\nforce = [1, 2, 3]\n')
+    s = Scenario.from_toml(p)
+    assert s == Scenario("x", operator=s.operator) and s.operator[0].force.tolist() == [1.0, 2.0, 3.0]
+    push = s.operator[0]
+    assert (push.profile, push.frequency, push.torque.tolist()) == ("constant", 0.5, [0.0, 0.0, 0.0])
+    p.write_text('name = "x"\n[[operator]]\nbody = "RLEG_FOOT"\nstart = 1.0\nduration = 0.0\n')
+    with pytest.raises(ConfigError, match=r"field 'operator\[0\].duration' = 0.0: expected a finite number > 0 \[s\]"):
+        Scenario.from_toml(p)
+    sim = tmp_path / "sim.toml"
+    sim.write_text(f'scenario = "{CONFIG_DIR / "scenarios" / "hanging.toml"}"\n')
+    cfg = SimConfig.from_toml(sim)
+    assert cfg.seed == 0 and cfg.servo_path == CONFIG_DIR / "servo.toml" and cfg.effects is None
+    sensors = tmp_path / "sensors.toml"
+    sensors.write_text((CONFIG_DIR / "sensors.toml").read_text() + '[[faults]]\nsensor = "imu"\nkind = "inf"\n'
+                                                                   'start = 0.0\nduration = 1.0\n')
+    with pytest.raises(ConfigError, match=r"field 'faults\[0\].kind' = 'inf': expected one of \['nan', 'stale'\]"):
+        SensorConfig.from_toml(sensors)
+
+
+def test_sensor_file_errors_name_the_table_key(tmp_path):
+    """A sensors file's keys are checked with SensorConfig's units and bounds, named by table and key."""
+    text = (CONFIG_DIR / "sensors.toml").read_text()
+    p = tmp_path / "sensors.toml"
+    p.write_text(text.replace("resolution = 1.0e-5", "resolution = -1.0"))
+    with pytest.raises(ConfigError, match=r"field 'encoders.resolution' = -1.0: expected a finite number >= 0 \[rad\]"):
+        SensorConfig.from_toml(p)
+    p.write_text(text.replace("offset_scale = [3.0, 0.3]", "offset_scale = [3.0]"))
+    with pytest.raises(ConfigError, match=r"field 'ft.offset_scale' = \[3.0\]: expected a list of 2 finite numbers"):
+        SensorConfig.from_toml(p)

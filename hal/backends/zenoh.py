@@ -9,12 +9,13 @@ import struct
 import threading
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 import zenoh
 
-from servotau.config import Section
+from servotau.config import Section, check_settings, load_dataclass, setting
 
 from ..backend import Backend
 from ..config import endpoint_list, with_override
@@ -40,6 +41,23 @@ logger = logging.getLogger(__name__)
 _TRUTH_KEPT = 16  # truth messages kept, newest ticks
 _FRAMES_KEPT = 64  # frames buffered between two reads (a ring: the oldest are dropped)
 _ALARM_POLL = 0.02  # [s] the read-timeout alarm looks at a blocked read at least this often
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    """The controller side's ``[hal.zenoh]`` table: the settings of :class:`ZenohBackend`."""
+
+    robot: str = setting("hrp2")  # key expressions servotau/v1/<robot>/...
+    connect: tuple[str, ...] = setting((DEFAULT_ENDPOINT,))  # the robot's endpoint, or a zenoh router's
+    listen: tuple[str, ...] = setting(())
+    mode: str = setting("peer", choices=("peer", "client"))
+    connect_timeout: float = setting(10.0, unit="s", min=0, strict_min=True)  # wait for the robot process
+    frame_timeout: float = setting(0.1, unit="s", min=0, strict_min=True)  # no frame for this long: HalTimeoutError
+    truth: bool = setting(True)  # receive the simulator's ground truth (evaluation)
+    realtime_priority: int = setting(0, min=0, max=99)  # SCHED_FIFO priority of the loop and zenoh's threads
+
+    def __post_init__(self):
+        check_settings(self, HalError)
 
 
 class ZenohBackend(Backend):
@@ -71,16 +89,16 @@ class ZenohBackend(Backend):
 
     def __init__(
         self,
-        robot: str = "hrp2",
+        robot: str = ZenohConfig.robot,
         *,
-        connect: Sequence[str] = (DEFAULT_ENDPOINT,),
-        listen: Sequence[str] = (),
-        mode: str = "peer",
-        connect_timeout: float = 10.0,
-        frame_timeout: float = 0.1,
+        connect: Sequence[str] = ZenohConfig.connect,
+        listen: Sequence[str] = ZenohConfig.listen,
+        mode: str = ZenohConfig.mode,
+        connect_timeout: float = ZenohConfig.connect_timeout,
+        frame_timeout: float = ZenohConfig.frame_timeout,
         zenoh_extra: Mapping[str, Any] | None = None,
-        truth: bool = True,
-        realtime_priority: int = 0,
+        truth: bool = ZenohConfig.truth,
+        realtime_priority: int = ZenohConfig.realtime_priority,
     ):
         self.keys = keys(robot)
         self.robot_name = robot
@@ -308,17 +326,8 @@ def from_config(hal: Section, *, port: int | None = None) -> ZenohBackend:
     """Open a :class:`ZenohBackend` from ``[hal.zenoh]`` (``port``: connect to ``tcp/127.0.0.1:<port>``
     instead of the configured endpoints); every error names the file and the field."""
     z = hal.section("zenoh", {})
-    z.check_keys(["robot", "connect", "listen", "mode", "connect_timeout", "frame_timeout", "truth",
-                  "realtime_priority"])
+    z.check_keys(ZenohConfig.__dataclass_fields__)
     if port is not None:
         z = with_override(z, "connect", [f"tcp/127.0.0.1:{port}"], "--port")
-    return ZenohBackend(
-        z.str("robot", "hrp2"),
-        connect=endpoint_list(z, "connect", [DEFAULT_ENDPOINT]),
-        listen=endpoint_list(z, "listen", []),
-        mode=z.str("mode", "peer", choices=["peer", "client"]),
-        connect_timeout=z.float("connect_timeout", 10.0, min=0, strict_min=True, unit="s"),
-        frame_timeout=z.float("frame_timeout", 0.1, min=0, strict_min=True, unit="s"),
-        truth=z.bool("truth", True),
-        realtime_priority=z.int("realtime_priority", 0, min=0, max=99),
-    )
+    endpoints = {key: tuple(endpoint_list(z, key, list(getattr(ZenohConfig, key)))) for key in ("connect", "listen")}
+    return ZenohBackend(**asdict(load_dataclass(ZenohConfig, z, **endpoints)))

@@ -24,7 +24,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from servotau.config import Section
+from servotau.config import Section, check_settings, load_dataclass, setting
 
 from ..errors import HalError
 from ..types import RobotInfo
@@ -53,41 +53,23 @@ _STATE_FLAGS = {FirmwareState.WAITING: FLAG_WAITING, FirmwareState.RUNNING: 0,
 class SafetyConfig:
     """Watchdog and limits of the robot-side firmware."""
 
-    hold_after: float = 0.05  # [s] no fresh command for this long: hold the measured position
-    servo_off_after: float = 1.0  # [s] no fresh command for this long: cut the servos (latched)
-    max_position_error: float | None = None  # [rad] |q_des - q| trip; None: RobotInfo.max_position_error
-    warn_interval: float = 1.0  # [s] minimum wall time between two warnings of the same kind
+    hold_after: float = setting(0.05, unit="s", min=0, strict_min=True)  # no fresh command: hold the position
+    servo_off_after: float = setting(1.0, unit="s", min="hold_after", strict_min=True)  # cut the servos (latched)
+    max_position_error: float | None = setting(None, unit="rad", min=0, strict_min=True)  # |q_des - q| trip;
+    # None: RobotInfo.max_position_error
+    warn_interval: float = setting(1.0, unit="s", min=0)  # minimum wall time between two warnings of one kind
     # Lock-step: the robot waits for each command by design, so only a hung controller should trip the
     # watchdog, not a slow tick (a calibration, a plot flush); a killed one is seen by its liveliness token.
-    lockstep_hold_after: float = 1.0  # [s]
-    lockstep_servo_off_after: float = 3.0  # [s]
+    lockstep_hold_after: float = setting(1.0, unit="s", min=0, strict_min=True)
+    lockstep_servo_off_after: float = setting(3.0, unit="s", min="lockstep_hold_after", strict_min=True)
 
     def __post_init__(self):
-        if not (math.isfinite(self.hold_after) and self.hold_after > 0):
-            raise HalError(f"SafetyConfig.hold_after = {self.hold_after}: expected a finite number > 0 [s]")
-        if not (math.isfinite(self.servo_off_after) and self.servo_off_after > self.hold_after):
-            raise HalError(f"SafetyConfig.servo_off_after = {self.servo_off_after}: expected a finite number "
-                           f"> hold_after = {self.hold_after} [s]")
-        if not self.lockstep_servo_off_after > self.lockstep_hold_after > 0:
-            raise HalError(f"SafetyConfig.lockstep_servo_off_after = {self.lockstep_servo_off_after}: expected > "
-                           f"lockstep_hold_after = {self.lockstep_hold_after} > 0 [s]")
-        if self.max_position_error is not None and not self.max_position_error > 0:
-            raise HalError(f"SafetyConfig.max_position_error = {self.max_position_error}: expected > 0 [rad]")
+        check_settings(self, HalError)
 
     @classmethod
     def from_section(cls, section: Section) -> SafetyConfig:
-        """Read a ``[*.safety]`` table: hold_after, servo_off_after, max_position_error, warn_interval."""
-        section.check_keys(["hold_after", "servo_off_after", "max_position_error", "warn_interval",
-                            "lockstep_hold_after", "lockstep_servo_off_after"])
-        hold = section.float("hold_after", cls.hold_after, min=0, strict_min=True, unit="s")
-        off = section.float("servo_off_after", cls.servo_off_after, min=hold, strict_min=True, unit="s")
-        err = section.float("max_position_error", None, min=0, strict_min=True, unit="rad") \
-            if "max_position_error" in section else None
-        warn = section.float("warn_interval", cls.warn_interval, min=0, unit="s")
-        ls_hold = section.float("lockstep_hold_after", cls.lockstep_hold_after, min=0, strict_min=True, unit="s")
-        ls_off = section.float("lockstep_servo_off_after", cls.lockstep_servo_off_after, min=ls_hold, strict_min=True,
-                               unit="s")
-        return cls(hold, off, err, warn, ls_hold, ls_off)
+        """Read a ``[*.safety]`` table (every field optional)."""
+        return load_dataclass(cls, section)
 
     def for_lockstep(self) -> SafetyConfig:
         """The same settings with the lock-step watchdog times in force."""

@@ -35,7 +35,7 @@ from ..errors import MalformedMessage, ProtocolVersionMismatch
 from ..log import LogWriter
 from ..wire.protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
 from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
-from .config import CLOCKS, ServerConfig
+from .config import CLOCKS, MODES, ServerConfig
 from .firmware import LOG_EXTRA, Firmware, FirmwareState, SafetyConfig
 from .realtime import set_realtime_priority, set_timer_slack
 from .served import ServedRobot
@@ -342,12 +342,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--name", help="robot name in the keys (default: RobotInfo.name)")
     p.add_argument("--listen", action="append", help=f"zenoh endpoint to listen on (default {DEFAULT_ENDPOINT})")
     p.add_argument("--connect", action="append", default=[], help="zenoh endpoint to connect to (router)")
-    p.add_argument("--mode", default="peer", choices=["peer", "client"])
-    p.add_argument("--clock", default="lockstep", choices=CLOCKS)
+    p.add_argument("--mode", default=ServerConfig.mode, choices=MODES)
+    p.add_argument("--clock", default=ServerConfig.clock, choices=CLOCKS)
     p.add_argument("--log", help="Parquet log of what was served")
     p.add_argument("--max-ticks", type=int)
     p.add_argument("--no-truth", action="store_true", help="do not publish the ground truth")
-    p.add_argument("--realtime-priority", type=int, default=0,
+    p.add_argument("--realtime-priority", type=int, default=ServerConfig.realtime_priority,
                    help="SCHED_FIFO priority 1..99 of the process (0: ordinary scheduling; needs root or "
                         "CAP_SYS_NICE)")
     p.add_argument("--hold-after", type=float, default=SafetyConfig.hold_after, help="[s]")
