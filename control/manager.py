@@ -7,7 +7,7 @@ the robot::
     manager = ControlManager.from_toml(info)                # config/control.toml
     manager.request_mode(Mode.TORQUE)                       # applied at the next tick, bumpless
     terms = manager.tick(frame, estimate, trajectory.sample(t))
-    robot.step(terms.q_des)
+    backend.write_array(terms.q_des)
     if manager.tripped: print(manager.report.message)       # latched until manager.reset()
 
 Modes:
