@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from servotau.hal.types import RobotInfo
+
 from .config import ControlConfig
 from .dynamics import BaseState
 from .inverse_dynamics import InverseDynamics
@@ -43,9 +45,10 @@ from .torque import JointTorqueController
 class TorqueControlLaw:
     """Eq. 10-12 for every joint (gains 0 on position-controlled joints), outputs in a :class:`ControlTerms`."""
 
-    def __init__(self, config: ControlConfig, model_path: str, period: float):
+    def __init__(self, config: ControlConfig, model_path: str, period: float, info: RobotInfo | None = None):
+        """``info``: the robot's root joint and F/T sensor frames (None: those of :mod:`servotau.description`)."""
         self.config = config
-        self.inverse_dynamics = InverseDynamics.from_config(config, model_path)
+        self.inverse_dynamics = InverseDynamics.from_config(config, model_path, info)
         self.torque = JointTorqueController.from_config(config, period)
         self.position_integral = PositionIntegral(self.inverse_dynamics.k_s, config.joint_vector("k_iq"),
                                                   config.joint_vector("position_integral_limit"),

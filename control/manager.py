@@ -80,7 +80,7 @@ class ControlManager:
         self.info = info
         self.config = config
         n = info.nq
-        self.law = TorqueControlLaw(config, str(model_path or info.model_path), info.period)
+        self.law = TorqueControlLaw(config, str(model_path or info.model_path), info.period, info)
         self.safety = SafetyMonitor(info, config.safety)
         self.terms = self.law.make_terms()
         self.torque_mask = config.torque_mask.copy()
