@@ -15,8 +15,8 @@ from support.controller import run
 from support.hal import controller, endpoint, free_port, robot_server, robot_status, stop_process
 
 from servotau.hal import FirmwareState, InProcessBackend, LogReader, ZenohBackend, keys
-from servotau.hal.wire.protocol import HEADER, HEADER_SIZE, encode_command
 from servotau.hal.robot.firmware import SafetyConfig
+from servotau.hal.wire.protocol import HEADER, HEADER_SIZE, encode_command
 from servotau.hal.wire.session import Session, zenoh_config
 from servotau.simrobot.fake import FakeRobot
 
