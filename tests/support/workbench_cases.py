@@ -187,7 +187,7 @@ def run_pairs(pairs) -> list[dict]:
         return list(pool.map(_work_pair, pairs, [key] * len(pairs)))
 
 
-_POOL: list = []
+POOL: list = []  # the worker pool, shut down at the end of the session (tests/conftest.py)
 _FUTURES: dict = {}
 # slowest first (elastic gears are simulated with 4 sub-steps), the clean log before its second use
 _ORDER = ("backlash", "elastic", *(f"{a}+{b}" for a, b in PAIRS), "clean", "backlash@link", "elastic@link")
@@ -205,7 +205,7 @@ def prefetch() -> None:
     try:
         pool = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1),
                                    mp_context=multiprocessing.get_context("spawn"))
-        _POOL.append(pool)
+        POOL.append(pool)
         for name in names:
             _FUTURES[name] = pool.submit(_work, name, key)
     finally:
