@@ -119,12 +119,18 @@ def test_fit_options_select_the_written_fit(cli_run, tmp_path, capsys):
     assert m.loss.kind == "least_squares" and m.k_tau == r["RLEG_JOINT3"]["two_stage"]["coefficients"]["k_tau"]
 
 
+def _default_sigint() -> None:  # pragma: no cover - runs in the child
+    """Ctrl-C as at a terminal: a test run started in the background (``pytest &``, CI runners) ignores SIGINT,
+    the child would inherit that and Python would install no KeyboardInterrupt handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_during_collect_keeps_what_was_recorded(tmp_path):
     """SIGINT in the middle of a collection exits 130 with a complete, readable log of the ticks so far."""
     log = tmp_path / "stopped.parquet"
     p = subprocess.Popen([PYTHON, "-m", "servotau.cli", "identify", "collect", "--out", str(log), "--backend",
                           "inprocess"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO_ROOT,
-                         env=dict(os.environ, PYTHONUNBUFFERED="1"))
+                         env=dict(os.environ, PYTHONUNBUFFERED="1"), preexec_fn=_default_sigint)
     try:
         deadline = time.monotonic() + 60
         for line in p.stdout:

@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from test_workbench_diagnose import cogging_truth, synthetic_table
+from support.synthetic import cogging_truth, synthetic_table
 
 from servotau.cli import main
 from servotau.identification import MotorParameters

@@ -15,51 +15,52 @@ from servotau.hal.wire.protocol import HEADER_SIZE, encode_frame, info_to_json
 from servotau.hal.wire.session import Session, zenoh_config
 from servotau.simrobot.fake import FakeRobot
 
+FRAME_TIMEOUT = 5.0  # [s] a safety net: the robot-time test must not fail on a descheduled robot process
 
-def test_read_times_out_when_no_new_frame_comes(tmp_path):
+
+def test_read_times_out_when_no_new_frame_comes(fake_zenoh):
     """Lock-step robot left without a command sends no new frame: read raises HalTimeoutError, not hangs."""
-    port = free_port()
-    with robot_server(tmp_path, port), ZenohBackend("fake", connect=[endpoint(port)]) as b:
-        first = b.read()
-        t0 = time.monotonic()
-        with pytest.raises(HalTimeoutError, match=f"no frame from robot \"fake\" within 0.1 s after frame {first.seq}"):
-            b.read(timeout=0.1)
-        waited = time.monotonic() - t0
-        assert 0.1 <= waited < 1.0  # the alarm thread woke the blocked read (its channel has no timeout)
-        b.write({"J00": float(first.q[0])})  # the link still works afterwards
-        assert b.read().seq == first.seq + 1
+    b = fake_zenoh
+    first = b.read()
+    t0 = time.monotonic()
+    with pytest.raises(HalTimeoutError, match=f"no frame from robot \"fake\" within 0.1 s after frame {first.seq}"):
+        b.read(timeout=0.1)
+    waited = time.monotonic() - t0
+    assert 0.1 <= waited < 1.0  # the alarm thread woke the blocked read (its channel has no timeout)
+    b.write({"J00": float(first.q[0])})  # the link still works afterwards
+    assert b.read().seq == first.seq + 1
 
 
-def test_close_unblocks_a_read_in_another_thread(tmp_path):
+def test_close_unblocks_a_read_in_another_thread(fake_server):
     """close() from another thread ends a blocked read at once with a HalError that says the backend is closed."""
-    port = free_port()
     errors: list[BaseException] = []
-    with robot_server(tmp_path, port):
-        b = ZenohBackend("fake", connect=[endpoint(port)])
-        b.read()
+    b = ZenohBackend("fake", connect=[endpoint(fake_server)])
+    b.read()
 
-        def blocked_read() -> None:
-            try:
-                b.read(timeout=30.0)
-            except BaseException as exc:  # noqa: BLE001 - the test inspects it
-                errors.append(exc)
+    def blocked_read() -> None:
+        try:
+            b.read(timeout=30.0)
+        except BaseException as exc:  # noqa: BLE001 - the test inspects it
+            errors.append(exc)
 
-        reader = threading.Thread(target=blocked_read)
-        reader.start()
-        time.sleep(0.2)
-        t0 = time.monotonic()
-        b.close()
-        reader.join(5.0)
-        assert not reader.is_alive() and time.monotonic() - t0 < 5.0
+    reader = threading.Thread(target=blocked_read)
+    reader.start()
+    time.sleep(0.2)
+    t0 = time.monotonic()
+    b.close()
+    reader.join(5.0)
+    assert not reader.is_alive() and time.monotonic() - t0 < 5.0
     assert len(errors) == 1 and isinstance(errors[0], HalError) and "closed" in str(errors[0])
 
 
 def test_realtime_read_returns_the_newest_frame_and_counts_the_skipped(tmp_path):
     """Real-time robot: frames queued while the controller was busy are skipped, the newest is returned."""
     port = free_port()
-    with robot_server(tmp_path, port, clock="realtime"), ZenohBackend("fake", connect=[endpoint(port)]) as b:
+    with robot_server(tmp_path, port, clock="realtime"), \
+            ZenohBackend("fake", connect=[endpoint(port)], frame_timeout=FRAME_TIMEOUT) as b:
         f0 = b.read()
-        time.sleep(0.05)  # about 50 ticks at 1 kHz
+        while b.status()["seq"] < f0.seq + 50:  # the robot steps 50 ticks while the controller is busy
+            time.sleep(0.01)
         f1 = b.read()
         assert f1.seq - f0.seq >= 10 and b.frames_skipped >= 9
         assert b.read().seq > f1.seq

@@ -6,10 +6,9 @@ import math
 
 import numpy as np
 import pytest
-from support.hal import endpoint, free_port, robot_server
 
 from servotau.errors import HalError
-from servotau.hal import Backend, InProcessBackend, LogWriter, ReplayBackend, ZenohBackend
+from servotau.hal import Backend, InProcessBackend, LogWriter, ReplayBackend
 from servotau.simrobot.fake import FakeRobot
 
 LIVE = ("zenoh", "inprocess")
@@ -20,10 +19,9 @@ def backend(request, tmp_path):
     """An open backend on a FakeRobot(seed=0), closed after the test."""
     kind = request.param
     if kind == "zenoh":
-        port = free_port()
-        with robot_server(tmp_path, port), ZenohBackend("fake", connect=[endpoint(port)]) as b:
-            b.kind = kind
-            yield b
+        b = request.getfixturevalue("fake_zenoh")  # tests/conftest.py
+        b.kind = kind
+        yield b
         return
     if kind == "inprocess":
         b = InProcessBackend(FakeRobot(seed=0))

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from test_workbench_diagnose import synthetic_table
+from support.synthetic import synthetic_table
 
 from servotau.errors import IdentificationError
 from servotau.identification.data import shift as shift_signal

@@ -10,8 +10,9 @@ lowered, and a miss that starts passing fails the suite so that the mark is remo
 import itertools
 import json
 
+import numpy as np
 import pytest
-from test_workbench_cases import _CACHE_DIR, PAIRS, SINGLE, outcome, run_pairs
+from support.workbench_cases import CACHE_DIR, PAIRS, SINGLE, outcome, run_pairs, sim_dataset, sim_log
 
 from servotau.identification.workbench import MIN_GAIN, get_effect
 from servotau.simrobot.servo_config import EFFECT_PARAMS
@@ -33,6 +34,27 @@ def _param(effect, misses):
 
 def _confusable(a: str, b: str) -> bool:
     return b in get_effect(a).confusable or a in get_effect(b).confusable
+
+
+def test_logs_are_what_a_controller_logs():
+    """The clean log has the single-joint columns, a quantised encoder and no velocity column."""
+    cols = sim_log("clean")
+    assert {"t", "q", "q_des", "tau", "segment"} <= set(cols) and "dq" not in cols
+    res = 1e-5  # [rad] encoder resolution of config/sensors.toml
+    assert np.allclose(np.round(cols["q"] / res) * res, cols["q"], atol=1e-12)
+    assert len(np.unique(cols["segment"])) == 4
+    ds = sim_dataset("clean")
+    assert ds.n == len(cols["t"]) and any("Savitzky-Golay" in n for n in ds.notes)
+    assert np.corrcoef(ds.signals["dq"], cols["true/dq"])[0, 1] > 0.999
+
+
+def test_excitation_covers_every_quadrant_and_reversals():
+    """The excitation cycle reverses often, holds still and moves loaded in all four quadrants."""
+    from servotau.identification.workbench import excitation_report
+
+    e = excitation_report(sim_dataset("clean").signals)
+    assert e.velocity_reversals >= 12 and e.hold_time > 2.0 and e.fast_time > 1.0
+    assert min(e.quadrants.values()) > 0.1 and e.torque_reversals_at_rest >= 4
 
 
 @pytest.mark.parametrize("effect", [_param(e, RANK_MISSES) for e in SINGLE])
@@ -137,8 +159,8 @@ def test_every_pair_of_hidden_effects():
     smallest fall measured: 0.53, Stribeck + thermal drift); the table is written for the report."""
     pairs = list(itertools.combinations(SINGLE, 2))
     results = run_pairs(pairs)
-    _CACHE_DIR.mkdir(parents=True, exist_ok=True)
-    (_CACHE_DIR / "pairs.json").write_text(json.dumps(results, indent=1, default=str))
+    CACHE_DIR.mkdir(parents=True, exist_ok=True)
+    (CACHE_DIR / "pairs.json").write_text(json.dumps(results, indent=1, default=str))
     first_ok = [o for o, p in zip(results, pairs, strict=True)
                 if o["added"] and (o["added"][0] in p or any(_confusable(o["added"][0], e) for e in p))]
     both = [o for o, p in zip(results, pairs, strict=True) if set(p) <= set(o["added"])]

@@ -3,7 +3,7 @@
 
 import numpy as np
 import pytest
-from test_workbench_diagnose import synthetic_table
+from support.synthetic import synthetic_table
 
 from servotau.actuator import ONLINE_SIGNALS, OnlineModel
 from servotau.errors import IdentificationError

@@ -46,6 +46,9 @@ def main() -> int:
     p.add_argument("--amplitude", type=float, default=0.2)
     p.add_argument("--log")
     p.add_argument("--announce", type=int, default=0, help="print 'running' after this many ticks")
+    p.add_argument("--frame-timeout", type=float, default=5.0,
+                   help="[s] read timeout: a safety net only (a robot process descheduled on a loaded machine is "
+                        "not a hung robot; a killed one is seen by its liveliness token)")
     a = p.parse_args()
     from servotau.hal import ZenohBackend
 
@@ -55,7 +58,7 @@ def main() -> int:
 
     backend = None
     try:
-        backend = ZenohBackend(a.robot, connect=[a.connect])
+        backend = ZenohBackend(a.robot, connect=[a.connect], frame_timeout=a.frame_timeout)
         run(backend, a.ticks, a.amplitude, log=a.log, on_tick=on_tick)
     except HalError as exc:
         print(json.dumps({"t_detect": time.monotonic(), "error": type(exc).__name__}), flush=True)

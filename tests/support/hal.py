@@ -7,13 +7,15 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
 from servotau.apps.processes import free_port, stop_process, wait_ready
 from servotau.errors import HalError
+from servotau.hal.robot.firmware import SafetyConfig
 
-__all__ = ["ENV", "controller", "endpoint", "free_port", "robot_server", "stop_process"]
+__all__ = ["ENV", "controller", "endpoint", "free_port", "robot_server", "robot_status", "stop_process"]
 
 SUPPORT = Path(__file__).resolve().parent
 TESTS = SUPPORT.parent
@@ -37,8 +39,14 @@ def endpoint(port: int) -> str:
 @contextmanager
 def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep", log: Path | None = None,
                  max_ticks: int | None = None, hold_after: float | None = None,
-                 servo_off_after: float | None = None, timeout: float = 20.0):
-    """A FakeRobot served over Zenoh in a subprocess; killed on exit whatever happens."""
+                 servo_off_after: float | None = None,
+                 lockstep_hold_after: float = SafetyConfig.lockstep_hold_after,
+                 lockstep_servo_off_after: float = SafetyConfig.lockstep_servo_off_after, timeout: float = 20.0):
+    """A FakeRobot served over Zenoh in a subprocess; killed on exit whatever happens.
+
+    The lock-step watchdog gets the shipped times (config/hal.toml, 1 s / 3 s) unless given: ``python -m
+    servotau.hal`` would otherwise take ``--hold-after`` (50 ms), and a controller descheduled for 50 ms on a
+    loaded machine would make the robot hold in the middle of a lock-step run."""
     ready = tmp / f"ready-{port}"
     args = [sys.executable, "-m", "servotau.hal", "--robot", "servotau.simrobot.fake:FakeRobot",
             "--kwargs", json.dumps({"seed": seed}), "--listen", endpoint(port), "--clock", clock,
@@ -51,6 +59,8 @@ def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep"
         args += ["--hold-after", str(hold_after)]
     if servo_off_after is not None:
         args += ["--servo-off-after", str(servo_off_after)]
+    args += ["--lockstep-hold-after", str(lockstep_hold_after),
+             "--lockstep-servo-off-after", str(lockstep_servo_off_after)]
     out = open(tmp / f"server-{port}.log", "w")
     p = subprocess.Popen(args, env=ENV, stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
     try:
@@ -69,3 +79,21 @@ def controller(port: int, *args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, str(SUPPORT / "controller.py"), "--connect", endpoint(port), *args],
                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=_die_with_parent)
+
+
+def robot_status(port: int, until, *, robot: str = "fake", timeout: float = 30.0) -> dict:
+    """The robot's ``.../status`` once ``until(status)`` holds, polled every 20 ms; ``timeout`` [s] of wall time
+    is a safety net only (then the last status is returned, for the caller's assertion to show)."""
+    from servotau.hal import keys
+    from servotau.hal.wire.session import Session, zenoh_config
+
+    s = Session(zenoh_config(connect=[endpoint(port)]))
+    try:
+        deadline = time.monotonic() + timeout
+        while True:
+            st = json.loads(next(iter(s.z.get(keys(robot).status, timeout=2.0))).ok.payload.to_bytes())
+            if until(st) or time.monotonic() > deadline:
+                return st
+            time.sleep(0.02)
+    finally:
+        s.close()

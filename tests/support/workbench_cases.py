@@ -1,6 +1,6 @@
 """Hidden-effect logs of the simulated HRP-2 knee and the workbench's outcome on each (session cache).
 
-Other workbench tests import :func:`outcome`, :func:`sim_log` and :data:`REFERENCE` from here. The first
+The workbench tests import :func:`outcome`, :func:`sim_log` and :data:`REFERENCE` from here. The first
 call starts simulating every log the default tests need and running the workbench on each, two cases at
 a time in background worker processes (one BLAS thread each); each call waits for its own case only.
 Logs are also kept in ``.pytest_cache/servotau-workbench/`` under a key hashing the simulator's sources,
@@ -58,7 +58,7 @@ CASES["elastic@link"] = {"elastic": {}}
 LOG_OF = {"clean@paper": "clean", "backlash@link": "backlash", "elastic@link": "elastic"}
 LINK_RESOLUTION = 1e-5  # [rad] of the link-side angle sensor (as the motor encoder)
 
-_CACHE_DIR = REPO_ROOT / ".pytest_cache" / "servotau-workbench"
+CACHE_DIR = REPO_ROOT / ".pytest_cache" / "servotau-workbench"
 _LOGS: dict[str, dict[str, np.ndarray]] = {}
 _OUTCOMES: dict[str, dict] = {}
 
@@ -88,7 +88,7 @@ def plan_of(name: str, hidden: dict) -> dict:
 
 def _path(name: str, key: str, hidden: dict) -> Path:
     case = hashlib.sha256(repr((sorted(hidden.items()), sorted(plan_of(name, hidden).items()))).encode())
-    return _CACHE_DIR / f"{name}-{key}-{case.hexdigest()[:8]}.npz"
+    return CACHE_DIR / f"{name}-{key}-{case.hexdigest()[:8]}.npz"
 
 
 def _load_or_simulate(name: str, key: str, hidden: dict | None = None) -> dict[str, np.ndarray]:
@@ -102,7 +102,7 @@ def _load_or_simulate(name: str, key: str, hidden: dict | None = None) -> dict[s
             return {k.replace("__", "/"): z[k] for k in z.files}
     cols = simulate_log(hidden or None, seed=0, plan=ExcitationPlan(cycle_s=CYCLE_S, **plan_of(name, hidden)))
     try:
-        _CACHE_DIR.mkdir(parents=True, exist_ok=True)
+        CACHE_DIR.mkdir(parents=True, exist_ok=True)
         tmp = p.with_suffix(f".{os.getpid()}.npz")
         np.savez(tmp, **{k.replace("/", "__"): v for k, v in cols.items()})
         tmp.replace(p)
@@ -187,7 +187,7 @@ def run_pairs(pairs) -> list[dict]:
         return list(pool.map(_work_pair, pairs, [key] * len(pairs)))
 
 
-_POOL: list = []
+POOL: list = []  # the worker pool, shut down at the end of the session (tests/conftest.py)
 _FUTURES: dict = {}
 # slowest first (elastic gears are simulated with 4 sub-steps), the clean log before its second use
 _ORDER = ("backlash", "elastic", *(f"{a}+{b}" for a, b in PAIRS), "clean", "backlash@link", "elastic@link")
@@ -205,7 +205,7 @@ def prefetch() -> None:
     try:
         pool = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1),
                                    mp_context=multiprocessing.get_context("spawn"))
-        _POOL.append(pool)
+        POOL.append(pool)
         for name in names:
             _FUTURES[name] = pool.submit(_work, name, key)
     finally:
@@ -239,24 +239,3 @@ def sim_dataset(name: str):
     from servotau.identification.workbench import load_dataset
 
     return load_dataset(sim_log(name))
-
-
-def test_logs_are_what_a_controller_logs():
-    """The clean log has the single-joint columns, a quantised encoder and no velocity column."""
-    cols = sim_log("clean")
-    assert {"t", "q", "q_des", "tau", "segment"} <= set(cols) and "dq" not in cols
-    res = 1e-5  # [rad] encoder resolution of config/sensors.toml
-    assert np.allclose(np.round(cols["q"] / res) * res, cols["q"], atol=1e-12)
-    assert len(np.unique(cols["segment"])) == 4
-    ds = sim_dataset("clean")
-    assert ds.n == len(cols["t"]) and any("Savitzky-Golay" in n for n in ds.notes)
-    assert np.corrcoef(ds.signals["dq"], cols["true/dq"])[0, 1] > 0.999
-
-
-def test_excitation_covers_every_quadrant_and_reversals():
-    """The excitation cycle reverses often, holds still and moves loaded in all four quadrants."""
-    from servotau.identification.workbench import excitation_report
-
-    e = excitation_report(sim_dataset("clean").signals)
-    assert e.velocity_reversals >= 12 and e.hold_time > 2.0 and e.fast_time > 1.0
-    assert min(e.quadrants.values()) > 0.1 and e.torque_reversals_at_rest >= 4
