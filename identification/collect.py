@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from servotau.config import setting
 from servotau.errors import IdentificationError
 from servotau.hal.types import SensorFrame
 
@@ -32,12 +33,13 @@ class SweepPlan:
     """High-velocity excitation of one joint around ``q0`` [rad]."""
 
     joint: str
-    a0: float = 0.02  # [rad] initial amplitude
-    a: float = 0.05  # [rad/s] amplitude growth
-    frequency: float = 0.6  # [Hz]
-    duration: float = 12.0  # [s]
-    limit_margin: float = 0.1  # [rad] kept from each joint limit
-    error_fraction: float = 0.5  # expected |q_des - q| kept below this fraction of the servo-cut threshold
+    a0: float = setting(0.02, unit="rad", min=0.0)  # initial amplitude
+    a: float = setting(0.05, unit="rad/s", min=0.0)  # amplitude growth
+    frequency: float = setting(0.6, unit="Hz", min=0.0, strict_min=True)
+    duration: float = setting(12.0, unit="s", min=0.0, strict_min=True)
+    limit_margin: float = setting(0.1, unit="rad", min=0.0)  # kept from each joint limit
+    error_fraction: float = setting(0.5, unit="-", min=0.0, strict_min=True)
+    """Expected ``|q_des - q|`` kept below this fraction of the servo-cut threshold."""
 
 
 @dataclass(frozen=True)
@@ -45,8 +47,8 @@ class HoldPlan:
     """High-torque phase: hold each configuration (joint name -> angle [rad]) for ``hold`` seconds."""
 
     configurations: Sequence[Mapping[str, float]] = field(default_factory=list)
-    move: float = 2.0  # [s] to reach each configuration
-    hold: float = 6.0  # [s] held while external forces load the joints
+    move: float = setting(2.0, unit="s", min=0.0, strict_min=True)  # to reach each configuration
+    hold: float = setting(6.0, unit="s", min=0.0, strict_min=True)  # held while external forces load the joints
 
 
 def sweep_amplitude_bound(plan: SweepPlan, q0: float, q_min: float, q_max: float, max_error: float) -> float:

@@ -16,13 +16,12 @@ to the period as :class:`~servotau.identification.collect.Collector` does).
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from servotau.actuator.loss import LOSS_KINDS, Loss
-from servotau.config import Section, load_toml
+from servotau.config import Section, check_settings, load_dataclass, load_toml, read_setting, setting
 from servotau.errors import IdentificationError
 
 from .collect import HoldPlan, SweepPlan
@@ -33,15 +32,6 @@ SWEEP_RETURN = 1.0  # [s] the Collector's move back to q0 after each sweep
 PHASES = ("settle", "sweep", "wait", "move", "hold")
 """Phase names; the log column ``ident/phase`` holds the index in this tuple."""
 
-_SWEEP_FIELDS = {  # SweepPlan field -> (unit, lower bound, strict)
-    "a0": ("rad", 0.0, False),
-    "a": ("rad/s", 0.0, False),
-    "frequency": ("Hz", 0.0, True),
-    "duration": ("s", 0.0, True),
-    "limit_margin": ("rad", 0.0, False),
-    "error_fraction": ("-", 0.0, True),
-}
-
 
 def ticks(seconds: float, period: float) -> int:
     """Ticks of a phase of ``seconds`` [s], rounded as the Collector does."""
@@ -49,51 +39,47 @@ def ticks(seconds: float, period: float) -> int:
 
 
 @dataclass(frozen=True)
+class LossKeys:
+    """The ``loss`` and ``w`` keys of the ``[fit]`` table: the loss of the fit written to the motor file."""
+
+    loss: str = setting("asymmetric", choices=LOSS_KINDS)  # eq. 8 "asymmetric" or eq. 7 "least_squares"
+    w: float = setting(100.0, min=1.0, strict_min=True)  # over-estimation weight of "asymmetric" (the paper's)
+
+    def to_loss(self) -> Loss:
+        return Loss.asymmetric(self.w) if self.loss == "asymmetric" else Loss.least_squares()
+
+    @classmethod
+    def read(cls, s: Section) -> Loss:
+        """The loss of ``s``'s ``loss`` and ``w`` keys (``w`` only with the asymmetric loss)."""
+        kind = read_setting(cls, "loss", s)
+        if kind == "asymmetric":
+            return Loss.asymmetric(read_setting(cls, "w", s))
+        if "w" in s:
+            raise s.error("w", s.data["w"], f'no w with loss = "{kind}"')
+        return Loss.least_squares()
+
+
+@dataclass(frozen=True)
 class FitSettings:
     """How ``servotau identify fit`` turns a log into motor parameters (``[fit]`` table)."""
 
-    loss: Loss = field(default_factory=lambda: Loss.asymmetric(100.0))  # the fit written to the motor file
-    coulomb: bool = False  # also fit k_c sign(dq) in the written fit (the paper drops it)
-    two_stage: bool = False  # write the two-stage fit (section 3.3.1) instead of the joint fit
-    dq_static: float = DQ_STATIC  # [rad/s] static threshold of the two-stage fit
-    downsample: int = 10  # keep every n-th valid sample (paper: 1 kHz data downsampled)
-    holdout_block: float = 1.0  # [s] length of the blocks of the held-out split
-    holdout_every: int = 3  # every n-th block is held out (not fitted, used for the metrics)
-    tau_shift: int = 1  # [ticks] dq_err[k] pairs with tau[k + tau_shift] (see pipeline.align_samples)
+    loss: Loss = field(default_factory=lambda: LossKeys().to_loss())  # the keys `loss`, `w` (:class:`LossKeys`)
+    coulomb: bool = setting(False)  # also fit k_c sign(dq) in the written fit (the paper drops it)
+    two_stage: bool = setting(False)  # write the two-stage fit (section 3.3.1) instead of the joint fit
+    dq_static: float = setting(DQ_STATIC, unit="rad/s", min=0.0, strict_min=True)  # static threshold (two-stage)
+    downsample: int = setting(10, min=1)  # keep every n-th valid sample (paper: 1 kHz data downsampled)
+    holdout_block: float = setting(1.0, unit="s", min=0.0, strict_min=True)  # blocks of the held-out split
+    holdout_every: int = setting(3, min=2)  # every n-th block is held out (not fitted, used for the metrics)
+    tau_shift: int = setting(1, unit="ticks", min=0, max=10)
+    """dq_err[k] pairs with tau[k + tau_shift] (see :func:`~servotau.identification.data.load_aligned`)."""
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.dq_static) and self.dq_static > 0):
-            raise IdentificationError(f"dq_static = {self.dq_static!r}: expected a finite number > 0 [rad/s]")
-        if int(self.downsample) != self.downsample or self.downsample < 1:
-            raise IdentificationError(f"downsample = {self.downsample!r}: expected an integer >= 1")
-        if not (math.isfinite(self.holdout_block) and self.holdout_block > 0):
-            raise IdentificationError(f"holdout_block = {self.holdout_block!r}: expected a finite number > 0 [s]")
-        if int(self.holdout_every) != self.holdout_every or self.holdout_every < 2:
-            raise IdentificationError(f"holdout_every = {self.holdout_every!r}: expected an integer >= 2")
-        if int(self.tau_shift) != self.tau_shift or not 0 <= self.tau_shift <= 10:
-            raise IdentificationError(f"tau_shift = {self.tau_shift!r}: expected an integer in [0, 10] [ticks]")
+        check_settings(self, IdentificationError)
 
     @classmethod
     def from_section(cls, s: Section) -> FitSettings:
-        s.check_keys(["loss", "w", "coulomb", "two_stage", "dq_static", "downsample", "holdout_block",
-                      "holdout_every", "tau_shift"])
-        kind = s.str("loss", "asymmetric", choices=LOSS_KINDS)
-        if kind == "asymmetric":
-            loss = Loss.asymmetric(s.float("w", 100.0, min=1.0, strict_min=True))
-        elif "w" in s:
-            raise s.error("w", s.data["w"], 'no w with loss = "least_squares"')
-        else:
-            loss = Loss.least_squares()
-        return cls(
-            loss=loss,
-            coulomb=s.bool("coulomb", False),
-            two_stage=s.bool("two_stage", False),
-            dq_static=s.float("dq_static", DQ_STATIC, min=0.0, strict_min=True, unit="rad/s"),
-            downsample=s.int("downsample", 10, min=1),
-            holdout_block=s.float("holdout_block", 1.0, min=0.0, strict_min=True, unit="s"),
-            holdout_every=s.int("holdout_every", 3, min=2),
-            tau_shift=s.int("tau_shift", 1, min=0, max=10),
-        )
+        s.check_keys([f.name for f in fields(cls)] + ["w"])
+        return load_dataclass(cls, s, ignore=("w",), loss=LossKeys.read(s))
 
 
 @dataclass(frozen=True)
@@ -102,16 +88,14 @@ class CollectionPlan:
 
     sweeps: tuple[SweepPlan, ...]
     holds: HoldPlan = field(default_factory=HoldPlan)
-    settle: float = 2.0  # [s]
-    holds_start: float = 0.0  # [s] robot time (from the first frame) of the first hold's move; 0: after the sweeps
+    settle: float = setting(2.0, unit="s", min=0.0)
+    holds_start: float = setting(0.0, unit="s", min=0.0)
+    """Robot time (from the first frame) of the first hold's move; 0: right after the sweeps."""
     source: str = "<code>"  # file the plan was read from (error messages)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sweeps", tuple(self.sweeps))
-        if not (math.isfinite(self.settle) and self.settle >= 0):
-            raise IdentificationError(f"{self.source}: settle = {self.settle!r}: expected a finite number >= 0 [s]")
-        if not (math.isfinite(self.holds_start) and self.holds_start >= 0):
-            raise IdentificationError(f"{self.source}: holds_start = {self.holds_start!r}: expected a number >= 0 [s]")
+        check_settings(self, lambda msg: IdentificationError(f"{self.source}: {msg}"))
         names = [s.joint for s in self.sweeps]
         if len(set(names)) != len(names):
             raise IdentificationError(f"{self.source}: swept joints {names}: expected each joint once")
@@ -168,16 +152,6 @@ class CollectionPlan:
         }
 
 
-def _sweep_values(s: Section) -> dict[str, float]:
-    return {key: s.float(key, min=lo, strict_min=strict, unit=unit)
-            for key, (unit, lo, strict) in _SWEEP_FIELDS.items() if key in s}
-
-
-def _sweep(s: Section, joint: str, base: Mapping[str, float]) -> SweepPlan:
-    s.check_keys(_SWEEP_FIELDS)
-    return SweepPlan(joint=joint, **{**base, **_sweep_values(s)})
-
-
 def load_plan(path: str | Path = DEFAULT_PLAN) -> tuple[CollectionPlan, FitSettings]:
     """Read a plan file (relative paths also under config/).
 
@@ -193,15 +167,13 @@ def load_plan(path: str | Path = DEFAULT_PLAN) -> tuple[CollectionPlan, FitSetti
     if not isinstance(joints, list) or not all(isinstance(j, str) and j for j in joints):
         raise c.error("joints", joints if joints is not None else "missing", "a list of joint names to sweep")
     sweep = c.section("sweep", {})
-    sweep.check_keys([*_SWEEP_FIELDS, "joints"])
+    defaults = load_dataclass(SweepPlan, sweep, ignore=("joints",), joint="")
     per_joint = sweep.section("joints", {})
-    defaults = {k: v for k, v in asdict(SweepPlan(joint="")).items() if k != "joint"}
-    defaults.update(_sweep_values(sweep))
     for j in per_joint.keys():
         if j not in joints:
             raise per_joint.error(j, "{...}", f"a table for a swept joint, one of {joints}")
-    sweeps = [_sweep(per_joint.section(j), j, defaults) if j in per_joint else SweepPlan(joint=j, **defaults)
-              for j in joints]
+    sweeps = [load_dataclass(SweepPlan, per_joint.section(j), base=defaults, joint=j) if j in per_joint
+              else replace(defaults, joint=j) for j in joints]
     h = c.section("hold", {})
     h.check_keys(["move", "hold", "configurations"])
     configs = h.data.get("configurations", [])
@@ -211,10 +183,9 @@ def load_plan(path: str | Path = DEFAULT_PLAN) -> tuple[CollectionPlan, FitSetti
     for i, cfg in enumerate(configs):
         sec = Section(cfg, h.file, f"{h.prefix}.configurations[{i}]")
         checked.append({k: sec.float(k, unit="rad") for k in sec.keys()})
-    holds = HoldPlan(configurations=checked, move=h.float("move", 2.0, min=0.0, strict_min=True, unit="s"),
-                     hold=h.float("hold", 6.0, min=0.0, strict_min=True, unit="s"))
-    plan = CollectionPlan(sweeps=tuple(sweeps), holds=holds, settle=c.float("settle", 2.0, min=0.0, unit="s"),
-                          holds_start=c.float("holds_start", 0.0, min=0.0, unit="s"), source=root.file)
+    holds = load_dataclass(HoldPlan, h, ignore=("configurations",), configurations=checked)
+    timing = {key: read_setting(CollectionPlan, key, c) for key in ("settle", "holds_start")}
+    plan = CollectionPlan(sweeps=tuple(sweeps), holds=holds, source=root.file, **timing)  # IdentificationError
     return plan, FitSettings.from_section(root.section("fit", {}))
 
 

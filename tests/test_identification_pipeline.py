@@ -176,3 +176,17 @@ def test_plan_errors_name_the_field(tmp_path):
     bad.write_text('[collect]\njoints = ["RLEG_JOINT3"]\n[collect.sweep]\nfreq = 1.0\n')
     with pytest.raises(ConfigError, match=r"field 'collect.sweep.freq'"):
         load_plan(bad)
+
+
+def test_plan_defaults_are_the_dataclasses_defaults(tmp_path):
+    """A plan naming only its joints loads to the dataclasses' own defaults (declared once, by setting())."""
+    minimal = tmp_path / "plan.toml"
+    minimal.write_text('[collect]\njoints = ["RLEG_JOINT3"]\n')
+    plan, settings = load_plan(minimal)
+    assert plan == CollectionPlan(sweeps=(SweepPlan("RLEG_JOINT3"),), source=str(minimal))
+    assert settings == FitSettings() and settings.loss.kind == "asymmetric" and settings.loss.w == 100.0
+    with pytest.raises(IdentificationError, match=r"FitSettings.downsample = 0: expected an integer >= 1"):
+        FitSettings(downsample=0)
+    settle = r"<code>: CollectionPlan.settle = -1.0: expected a finite number >= 0 \[s\]"
+    with pytest.raises(IdentificationError, match=settle):
+        CollectionPlan(sweeps=(), settle=-1.0)

@@ -180,9 +180,14 @@ def save_model(
     *,
     provenance: str,
     metrics: FitMetrics | None = None,
+    dead_band_log: str | Path | None = None,
 ) -> Path:
     """Write the model into the motor-parameter file ``path`` under ``joint`` (other joints of an
-    existing file are kept)."""
+    existing file are kept).
+
+    ``dead_band_log``: a servotau log whose holds give the joint's ``deadzone`` term instead of the fitted one
+    (:func:`~servotau.identification.deadband.with_log_dead_bands`, with the model's ``k_tau``): the motor file
+    of the controller in one step."""
     if isinstance(ladder_or_model, Ladder):
         model = ladder_or_model.final
         train = ladder_or_model.rungs[-1].comparison.train
@@ -190,6 +195,10 @@ def save_model(
     else:
         model = ladder_or_model
     motor = model.to_motor_model(provenance, metrics)
+    if dead_band_log is not None:
+        from ..deadband import with_log_dead_bands
+
+        motor = with_log_dead_bands(MotorParameters({joint: motor}), dead_band_log)[0][joint]
     p = Path(path)
     models: Mapping[str, MotorModel] = dict(MotorParameters.load_toml(p)) if p.exists() else {}
     return MotorParameters({**models, joint: motor}).save_toml(p)

@@ -124,13 +124,13 @@ def fit_main(args) -> int:
 
     from servotau.actuator.loss import Loss
     from servotau.identification.pipeline import fit_log, write_motor_file
-    from servotau.identification.plan import load_plan, parse_joints
+    from servotau.identification.plan import LossKeys, load_plan, parse_joints
 
     _, settings = load_plan(args.plan)
     if args.w is not None and (args.loss or settings.loss.kind) == "least_squares":
         raise IdentificationError(f"--w {args.w}: expected no weight with the least-squares loss")
     kind = args.loss or settings.loss.kind
-    w = args.w if args.w is not None else (settings.loss.w or 100.0)
+    w = args.w if args.w is not None else (settings.loss.w or LossKeys().w)
     loss = Loss.asymmetric(w) if kind == "asymmetric" else Loss.least_squares()
     changes = {"loss": loss}
     if args.two_stage:

@@ -2,7 +2,7 @@
 
     servotau model compare  LOG [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
     servotau model diagnose LOG [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
-    servotau model add      LOG [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml]
+    servotau model add      LOG [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml [--dead-band holds]]
     servotau model simulate OUT.parquet [--hidden EFFECT ...] [--cycles 4] [--seed 0]
 
 Common options: --map ROLE=COLUMN (column roles for other tables), --loss least_squares|asymmetric
@@ -47,6 +47,9 @@ def register(subparsers) -> None:
                             help="add this effect (repeatable, in order); default: greedy by diagnosis")
             sp.add_argument("--max-steps", type=int, default=4, help="most effects the greedy search adds")
             sp.add_argument("--save", metavar="TOML", help="write the final model into this motor-parameter file")
+            sp.add_argument("--dead-band", choices=("holds",),
+                            help="with --save, on a servotau log: replace the saved joint's deadzone term by the "
+                                 "dead band measured on the log's holds (identification/deadband.py)")
         sp.set_defaults(func=run)
     sim = sub.add_parser("simulate", help="a log of the simulated HRP-2 with hidden effects (to try the workbench)")
     sim.add_argument("out", help="output table (.parquet or .csv)")
@@ -130,8 +133,15 @@ def run(args: argparse.Namespace) -> int:
     if args.folds < 2:
         raise IdentificationError(f"--folds {args.folds}: expected at least 2")
     loss = Loss.asymmetric(args.w) if args.loss == "asymmetric" else Loss.least_squares()
+    dead_band = getattr(args, "dead_band", None)
+    if dead_band and not args.save:
+        raise IdentificationError(f"--dead-band {dead_band}: expected --save FILE (the dead band goes into the saved "
+                                  "motor file)")
     say(f"reading {args.log}")
     ds = load_dataset(args.log, joint=args.joint, roles=_roles(args.map))
+    if dead_band and ds.joint is None:
+        raise IdentificationError(f"--dead-band {dead_band}: {ds.source} names no joint: expected a servotau log "
+                                  "(its holds are read per joint, --joint J)")
     if args.align_torque > 0:
         ds, shift = align_torque(ds, args.align_torque)
         say(f"torque re-timed by {1e3 * shift:.0f} ms")
@@ -189,9 +199,16 @@ def run(args: argparse.Namespace) -> int:
             if any(OFFLINE_ESTIMATE in note for note in ds.notes):
                 tau += f" ({OFFLINE_ESTIMATE})"
             path = save_model(ladder, args.save, joint,
-                              provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}")
+                              provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}",
+                              dead_band_log=args.log if dead_band else None)
             out["saved"] = {"file": str(path), "joint": joint}
             say(f"saved {ladder.final.spec.label()} to {path} [{joint}]")
+            if dead_band:
+                from servotau.actuator import MotorParameters
+
+                d = MotorParameters.load_toml(path)[joint].extra["deadzone"].coefficient
+                out["saved"]["dead_band"] = d
+                say(f"deadzone: d = {1e3 * d:.3f} mrad on the holds of {args.log}")
     if args.report:
         page = _report(args.report, ds, comparison, diagnosis, ladder, out)
         out["report"] = str(page)
