@@ -27,7 +27,7 @@ experiments: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
 
 bench: $(STAMP)
-	@for b in bench/*.py; do echo "== $$b"; $(BIN)/python $$b --json || exit 1; done
+	@for b in bench/[!_]*.py; do echo "== $$b"; $(BIN)/python $$b --json || exit 1; done
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -21,7 +21,7 @@ truth: a pure controller).
   (``realtime_priority``, hal/robot/realtime.py; as a robot's control loop runs), if the user may.
 - ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
 - ``baseline_rtt_p50_us`` / ``_p99_us``: a bare Zenoh Python ping-pong with the same sizes,
-  settings and threading (bench/zenoh_pingpong.py, ``channel``), in the same run;
+  settings and threading (bench/_zenoh_pingpong.py, ``channel``), in the same run;
   ``rtt_*_ratio_to_baseline``: what the HAL adds, as a ratio that a shared machine's load changes
   less than the absolute figures. ``baseline_threads_*``: the same ping-pong through Python
   callback threads (the HAL's pattern before); ``threads_to_channel_*_ratio``: what the channel
@@ -125,9 +125,9 @@ def bench_realtime(robot: str, scenario: str | None, duration: float, priority: 
 
 def bench_baseline(ticks: int, pattern: str = "channel", zenoh_runtime: str | None = None,
                    prefix: str | None = None) -> dict:
-    """Bare Zenoh ping-pong (bench/zenoh_pingpong.py), the floor under ``rtt_*``, in this run;
+    """Bare Zenoh ping-pong (bench/_zenoh_pingpong.py), the floor under ``rtt_*``, in this run;
     ``zenoh_runtime``: the ZENOH_RUNTIME of both processes (None: the HAL's layout)."""
-    port, script = free_port(), str(Path(__file__).with_name("zenoh_pingpong.py"))
+    port, script = free_port(), str(Path(__file__).with_name("_zenoh_pingpong.py"))
     env = dict(os.environ, **({"ZENOH_RUNTIME": zenoh_runtime} if zenoh_runtime is not None else {}))
     robot = subprocess.Popen([sys.executable, script, "robot", str(port), str(ticks), pattern], stdout=subprocess.PIPE,
                              text=True, env=env)

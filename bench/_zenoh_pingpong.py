@@ -1,5 +1,8 @@
 """The floor under the HAL's round trip: a bare Zenoh Python ping-pong between two processes.
 
+A helper that bench/hal.py starts twice (robot and controller roles), not a benchmark of its own: `make bench`
+skips the bench/_*.py helpers.
+
 Same session settings as the HAL (hal/wire/session.py: loopback, express publishers, REAL_TIME
 priority, the HAL's GIL switch interval) and the same payload sizes (a 30-joint frame and
 command), but no decoding, firmware, robot or bookkeeping. The "robot" publishes a ping and sends
@@ -15,8 +18,8 @@ bench/hal.py reports the HAL's round trip as a ratio to ``channel``, measured in
 ``threads`` as a ratio to ``channel`` (what the channel pattern saves). The robot also reports its
 process's CPU time per round trip (all threads, zenoh's included).
 
-    python bench/zenoh_pingpong.py robot PORT N [channel|threads]   # prints {"rtt_p50_us": ..., "cpu_us_per_rt": ...}
-    python bench/zenoh_pingpong.py controller PORT N [channel|threads]
+    python bench/_zenoh_pingpong.py robot PORT N [channel|threads]   # prints {"rtt_p50_us": ..., "cpu_us_per_rt": ...}
+    python bench/_zenoh_pingpong.py controller PORT N [channel|threads]
 """
 
 from __future__ import annotations
