@@ -1,0 +1,46 @@
+"""The model workbench on an independent family of servo plants (issue 18, item 6): a confusion matrix.
+
+Simulates single-joint position-servo plants written from first principles (servotau/experiments/plant_family.py,
+no simrobot, no workbench code), each clean or with one or two hidden effects, sampled every 1 to 16 ms, and
+runs the workbench's diagnosis (``servotau model diagnose``, paper base) on each log. Prints ONE JSON object:
+per-effect hit rates (hidden effect ranked first / first or second), the false-alarm rate on clean logs, per part
+(tuning: seeds 0 .. n/2 - 1; held-out: n/2 .. n - 1) and per sample-period band, the confusion matrix, seconds.
+Progress on stderr.
+
+    python bench/workbench_family.py --json [--n 100] [--quick] [--workers 2] [--rows rows.json]
+"""
+
+import argparse
+import json
+import sys
+import time
+
+from servotau.experiments.plant_scoring import run_family, score
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--json", action="store_true", help="print JSON (the only output format)")
+    parser.add_argument("--n", type=int, default=100, help="plants (seeds 0 .. n-1; the upper half is held out)")
+    parser.add_argument("--quick", action="store_true", help="8 plants of 8 s")
+    parser.add_argument("--duration", type=float, default=20.0, help="log length [s]")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--rows", metavar="FILE", help="also write the per-log rows (JSON)")
+    args = parser.parse_args()
+    n, duration = (8, 8.0) if args.quick else (args.n, args.duration)
+    split = n // 2
+    start = time.perf_counter()
+    say = lambda msg: print(f"[{time.perf_counter() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)  # noqa: E731
+    rows = run_family(range(n), workers=args.workers, duration=duration, split=split, progress=say)
+    if args.rows:
+        with open(args.rows, "w") as f:
+            json.dump(rows, f, indent=1)
+    result = {"n": n, "split": {"tuning": f"seeds 0..{split - 1}", "held_out": f"seeds {split}..{n - 1}"},
+              "duration_s": duration, "base": "paper", **score(rows),
+              "seconds": round(time.perf_counter() - start, 1),
+              "diagnose_seconds_mean": round(sum(r["seconds"] for r in rows) / max(len(rows), 1), 2)}
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
