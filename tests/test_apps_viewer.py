@@ -11,8 +11,8 @@ from servotau.apps.viewer import RerunStream, open_recording
 def test_rerun_stream_saves_a_recording_with_gaps_in_signals(tmp_path):
     """Streaming to a .rrd file works, including a signal that is missing on some ticks, without warnings."""
     path = tmp_path / "s.rrd"
-    from servotau.simrobot.model import JOINT_NAMES as joints
-    from servotau.simrobot.model import MODEL_PATH
+    from servotau.description import JOINT_NAMES as joints
+    from servotau.description import MODEL_PATH
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -26,8 +26,8 @@ def test_rerun_stream_saves_a_recording_with_gaps_in_signals(tmp_path):
 
 def test_bad_rerun_target_or_joint_names_are_clear_errors(tmp_path):
     """An unknown --rerun target names the expected forms; joints missing from the model are named."""
+    from servotau.description import MODEL_PATH
     from servotau.errors import ConfigError
-    from servotau.simrobot.model import MODEL_PATH
 
     with pytest.raises(ConfigError, match="save:FILE, connect:ADDR, spawn"):
         open_recording("view:here")

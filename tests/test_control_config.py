@@ -9,9 +9,9 @@ import pytest
 
 from servotau.config import CONFIG_DIR
 from servotau.control.config import ControlConfig, ForceTask, JointGains, SafetyLimits
+from servotau.description import JOINT_NAMES, MODEL_PATH
 from servotau.errors import ConfigError, ControlError
 from servotau.hal.types import RobotInfo
-from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
 
 INFO = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
 with open(CONFIG_DIR / "control.toml", "rb") as _f:

@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from servotau.control.dynamics import BaseState, RobotDynamics
+from servotau.description import JOINT_NAMES, MODEL_PATH
 from servotau.errors import ControlError
-from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH, default_joint_map, half_sitting_qpos, load_mujoco
+from servotau.simrobot.model import default_joint_map, half_sitting_qpos, load_mujoco
 
 
 def _mujoco_at(qpos, qvel=None):

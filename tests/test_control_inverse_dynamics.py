@@ -7,8 +7,9 @@ import pytest
 from servotau.control.config import ForceTask
 from servotau.control.dynamics import RobotDynamics
 from servotau.control.inverse_dynamics import InverseDynamics
+from servotau.description import JOINT_NAMES, MODEL_PATH
 from servotau.errors import ControlError
-from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH, default_joint_map, half_sitting_qpos, load_mujoco
+from servotau.simrobot.model import default_joint_map, half_sitting_qpos, load_mujoco
 
 Z = np.zeros(30)
 

@@ -8,7 +8,8 @@ from servotau.config import CONFIG_DIR
 from servotau.control.config import ControlConfig, ForceTask, JointGains, SafetyLimits
 from servotau.control.gains import k9_from_kf
 from servotau.control.law import TorqueControlLaw
-from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH, default_joint_map, half_sitting_qpos
+from servotau.description import JOINT_NAMES, MODEL_PATH
+from servotau.simrobot.model import default_joint_map, half_sitting_qpos
 
 LEG = [f"RLEG_JOINT{i}" for i in range(6)]
 

@@ -8,10 +8,11 @@ import pytest
 from servotau.control import ControlConfig, ControlManager, Mode, StateEstimate
 from servotau.control.safety import CHECKS, SafetyMonitor
 from servotau.control.trajectory import TrajectoryPoint
+from servotau.description import JOINT_NAMES
 from servotau.errors import ControlError, SafetyTrip
 from servotau.estimation import EstimatorConfig, TorqueEstimator
 from servotau.hal.types import STATUS_SATURATED, SensorFrame
-from servotau.simrobot.model import JOINT_NAMES, default_joint_map, half_sitting_qpos
+from servotau.simrobot.model import default_joint_map, half_sitting_qpos
 from servotau.simrobot.sim import SimConfig, SimRobot
 
 ROBOT = SimRobot(SimConfig.named("hanging"))

@@ -7,8 +7,8 @@ from servotau.actuator import MotorModel, MotorParameters
 from servotau.config import CONFIG_DIR
 from servotau.control.config import JointGains
 from servotau.control.torque import JointTorqueController
+from servotau.description import JOINT_NAMES
 from servotau.errors import ConfigError, ControlError
-from servotau.simrobot.model import JOINT_NAMES
 
 KNEE = JOINT_NAMES.index("RLEG_JOINT3")
 MOTORS = {"RLEG_JOINT3": MotorModel(k_tau=5.1e-5, k_v=0.006561, k_c=2e-4, provenance="test"),

@@ -7,11 +7,12 @@ import pinocchio as pin
 import pytest
 
 from servotau.config import CONFIG_DIR
+from servotau.description import load_pinocchio
 from servotau.errors import EstimationError
 from servotau.estimation.config import EstimatorConfig
 from servotau.estimation.estimator import TorqueEstimator
 from servotau.hal.types import STATUS_INVALID, STATUS_STALE, RobotInfo, SensorFrame
-from servotau.simrobot.model import load_pinocchio, mujoco_to_pinocchio_state
+from servotau.simrobot.model import mujoco_to_pinocchio_state
 from servotau.simrobot.scenario import Scenario
 from servotau.simrobot.sim import SimConfig, SimRobot
 

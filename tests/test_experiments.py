@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from servotau.cli import main as cli_main
+from servotau.description import JOINT_NAMES, MODEL_PATH
 from servotau.experiments import common, components, estimation, force, motion
 from servotau.experiments.report import write_results
 from servotau.hal.types import RobotInfo
-from servotau.simrobot.model import JOINT_NAMES, MODEL_PATH
 
 
 @pytest.fixture(scope="module")
