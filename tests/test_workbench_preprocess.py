@@ -4,7 +4,6 @@ velocity, and no lag-like false alarm on a clean log of a stiff plant (servotau/
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
 from servotau.identification.workbench.data import cv_window
@@ -63,13 +62,38 @@ def test_time_jumps_are_noted():
     assert any(n.startswith("time: 1 steps longer") for n in ds.notes)
 
 
-@pytest.mark.parametrize("seed", [6])
-def test_clean_stiff_plant_raises_no_lag_false_alarm(seed):
+def _plant_diagnosis(seed, hidden):
     from servotau.experiments import plant_family as pf
 
-    plant = pf.draw_plant(seed, hidden=(), period=1e-3, duration=8.0)
-    assert plant.K > 2000  # a stiff servo: the fixed 41 ms window named `delay` here
+    plant = pf.draw_plant(seed, hidden=hidden, period=1e-3, duration=8.0)
     (true,) = pf.simulate([plant], 8.0)
     ds = load_dataset(dict(pf.measure(plant, true)))
-    d = diagnose(ds, parse_spec("paper", ds.signals))
+    return plant, ds, diagnose(ds, parse_spec("paper", ds.signals))
+
+
+def test_clean_stiff_plant_raises_no_lag_false_alarm():
+    plant, ds, d = _plant_diagnosis(6, ())
+    assert plant.K > 2000  # a stiff servo: the fixed 41 ms window named `delay` here
     assert d.verdict != "missing_effect"
+    assert ds.preprocessing["dq"]["source"] == "derivative of q" and ds.preprocessing["dq"]["window"] < 41
+
+
+def test_lag_that_does_not_survive_a_faster_derivative_is_not_named():
+    _plant, _ds, d = _plant_diagnosis(0, ())  # clean: with the chosen window `delay` removes ~20 %
+    assert d.verdict != "missing_effect"
+    reasons = {c.effect: c.reason for c in d.ranking if not c.testable}
+    assert "differentiation's lag" in reasons["delay"]
+
+
+def test_true_delay_survives_the_faster_derivative():
+    _plant, _ds, d = _plant_diagnosis(3, ("delay",))
+    assert d.verdict == "missing_effect" and d.ranking[0].effect == "delay"
+
+
+def test_log_velocity_skips_the_faster_derivative_check():
+    cols = _log(1e-3, 1e-5, with_dq=True)
+    ds = load_dataset(cols)
+    assert ds.preprocessing["dq"] == {"source": "log", "column": "dq"}
+    from servotau.identification.workbench.data import faster_derivative
+
+    assert faster_derivative(ds) is None

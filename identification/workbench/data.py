@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +45,8 @@ from ..data import ROLES, read_table, resolve_roles, segments, shift, table_colu
 from ..data.tables import servotau_joints
 
 __all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "ROLES", "SG_WINDOW_DDQ_S", "SG_WINDOW_S", "SMOOTH_TAU_S",
-           "Dataset", "align_torque", "cv_window", "describe", "load_dataset", "read_table", "write_table"]
+           "Dataset", "align_torque", "cv_window", "describe", "faster_derivative", "load_dataset", "read_table",
+           "write_table"]
 
 log = logging.getLogger(__name__)
 SG_WINDOW_S = 0.041  # [s] the former fixed velocity window (kept for reference; windows are now chosen from the data)
@@ -74,6 +75,8 @@ class Dataset:
         joint: Joint name, or None.
         n_dropped: Rows dropped for NaN or inf.
         notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q").
+        preprocessing: Per derived signal (``dq``, ``tau``): ``source`` ("log", "derivative of q",
+            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``.
     """
 
     signals: Signals
@@ -84,6 +87,7 @@ class Dataset:
     joint: str | None = None
     n_dropped: int = 0
     notes: tuple[str, ...] = field(default_factory=tuple)
+    preprocessing: Mapping[str, Mapping] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -194,14 +198,18 @@ def load_dataset(
     if "acceleration" in roles:
         sig["ddq_est"] = sig["ddq"]  # the log's own acceleration replaces the filtered one of the effects
     wq = None
+    prep: dict[str, dict] = {}
     if "position" in roles and dt is not None and not {"velocity", "acceleration"} <= set(roles):
         wq = dq_window if dq_window is not None else cv_window(used["position"], runs, 2)
     if "velocity" in roles:
         notes.append(f"dq: the log's own velocity column '{roles['velocity']}'")
+        prep["dq"] = {"source": "log", "column": roles["velocity"]}
     else:
         w = wq
         sig["dq"] = _differentiate(used["position"], runs, dt, 1, w)[valid]
         how = "chosen by cross-validation on the encoder" if dq_window is None else "given"
+        prep["dq"] = {"source": "derivative of q", "window": int(w), "seconds": float(w * dt), "order": 2,
+                      "chosen": "cross-validation" if dq_window is None else "given"}
         notes.append(f"dq: centred Savitzky-Golay derivative of q ({w} samples = {1e3 * w * dt:.3g} ms, order 2, "
                      f"{how})")
     if "acceleration" not in roles and "position" in roles and dt is not None:
@@ -216,6 +224,8 @@ def load_dataset(
             wt = _window(smooth_torque_s, dt)
             how = "given"
         sig["tau"] = _differentiate(used["torque"], runs, dt, 0, wt)[valid]
+        prep["tau"] = {"source": "smoothed", "window": int(wt), "seconds": float(wt * dt), "order": 2,
+                       "chosen": "cross-validation" if smooth_torque_s is None else "given"}
         notes.append(f"tau: centred Savitzky-Golay smoothing ({wt} samples = {1e3 * wt * dt:.3g} ms, order 2, "
                      f"no delay, {how})")
     if "target" in roles:
@@ -227,7 +237,26 @@ def load_dataset(
             sig[col] = arr[valid]
     n = int(valid.sum())
     segment = used["segment"][valid] if "segment" in roles else None
-    return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes))
+    return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes), prep)
+
+
+def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] | None:
+    """``ds`` with ``dq`` (and ``ddq``) differentiated with ``factor`` times the window (odd, at least
+    ``MIN_WINDOW``), and that window; None when the velocity is the log's own or the window cannot shrink.
+    The check of :func:`~.diagnose.diagnose` that a lag-like effect is not the differentiation's own lag."""
+    info = ds.preprocessing.get("dq", {})
+    if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
+        return None
+    w = max(MIN_WINDOW, int(round(factor * info["window"])) | 1)
+    if w >= info["window"]:
+        return None
+    t = ds.signals["t"] if "t" in ds.signals else None
+    runs = segments(t, ds.dt, valid=np.ones(ds.n, dtype=bool), max_gap=RUN_GAP)
+    q = ds.signals["q"]
+    cols = {"dq": _differentiate(q, runs, ds.dt, 1, w)}
+    if "ddq_est" not in ds.signals:
+        cols["ddq"] = _differentiate(q, runs, ds.dt, 2, 2 * w - 1)
+    return replace(ds, signals=ds.signals.with_columns(**cols)), w
 
 
 def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | None,
@@ -364,5 +393,6 @@ def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float
         return ds, 0.0
     sig = ds.signals.with_columns(tau=shift(tau, best, fill="hold"))
     note = f"tau: advanced by {best * ds.dt * 1e3:.0f} ms to match the encoders (estimator delay)"
-    out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note))
+    out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note),
+                  ds.preprocessing)
     return out, best * ds.dt
