@@ -18,17 +18,22 @@ Three layouts are recognised, in this order:
 3. A single-joint table: ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], optional ``dq``
    [rad/s] and ``segment``.
 
-Then ``target = q_des - q`` [rad]. Without a velocity column, ``dq`` is the centred Savitzky-Golay
-derivative of ``q`` (window ``SG_WINDOW_S``, order 2), computed on each run of valid samples; ``ddq``
-likewise (window ``SG_WINDOW_DDQ_S``, order 3). The torque is smoothed by a centred SG filter
-(``SMOOTH_TAU_S``, order 2: no delay). Rows with NaN or inf in a used column are dropped and counted.
+Then ``target = q_des - q`` [rad]. With a velocity column, ``dq`` is the log's own (said in the notes).
+Without one, ``dq`` is the centred Savitzky-Golay derivative of ``q`` (order 2), computed on each run of
+valid samples, with a window chosen from the data, never fixed milliseconds (:func:`cv_window`: the odd
+sample count whose leave-one-out SG smoother best predicts each held-out encoder sample, between
+``MIN_WINDOW`` samples and a bound from the log length); ``ddq`` likewise (order 3, twice the window).
+The torque is smoothed by a centred SG filter (order 2: no delay), its window chosen the same way from
+the torque's own noise. The notes give the source and window (samples and seconds) of each. Windows are in
+samples of the median time step; time steps longer than ``RUN_GAP`` periods end a run (filters do not
+cross them) and are counted in the notes. Rows with NaN or inf in a used column are dropped and counted.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,13 +44,16 @@ from servotau.errors import IdentificationError
 from ..data import ROLES, read_table, resolve_roles, segments, shift, table_columns, write_table
 from ..data.tables import servotau_joints
 
-__all__ = ["MIN_SAMPLES", "OFFLINE_ESTIMATE", "ROLES", "SG_WINDOW_DDQ_S", "SG_WINDOW_S", "SMOOTH_TAU_S", "Dataset",
-           "align_torque", "describe", "load_dataset", "read_table", "write_table"]
+__all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "ROLES", "SG_WINDOW_DDQ_S", "SG_WINDOW_S", "SMOOTH_TAU_S",
+           "Dataset", "align_torque", "cv_window", "describe", "faster_derivative", "load_dataset", "read_table",
+           "write_table"]
 
 log = logging.getLogger(__name__)
-SG_WINDOW_S = 0.041  # [s] centred SG window of the velocity (41 samples at 1 kHz)
-SG_WINDOW_DDQ_S = 0.081  # [s] centred SG window of the acceleration
-SMOOTH_TAU_S = 0.021  # [s] centred SG smoothing of the torque (21 samples at 1 kHz)
+SG_WINDOW_S = 0.041  # [s] the former fixed velocity window (kept for reference; windows are now chosen from the data)
+SG_WINDOW_DDQ_S = 0.081  # [s] the former fixed acceleration window
+SMOOTH_TAU_S = 0.021  # [s] the former fixed torque smoothing (the memory probe's horizon)
+MIN_WINDOW = 5  # [samples] shortest SG window considered by cv_window
+MAX_WINDOW = 101  # [samples] longest SG window considered by cv_window
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
 RUN_GAP = 1.5  # [periods] a longer time step ends a run of samples (filters do not cross it)
@@ -67,6 +75,8 @@ class Dataset:
         joint: Joint name, or None.
         n_dropped: Rows dropped for NaN or inf.
         notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q").
+        preprocessing: Per derived signal (``dq``, ``tau``): ``source`` ("log", "derivative of q",
+            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``.
     """
 
     signals: Signals
@@ -77,6 +87,7 @@ class Dataset:
     joint: str | None = None
     n_dropped: int = 0
     notes: tuple[str, ...] = field(default_factory=tuple)
+    preprocessing: Mapping[str, Mapping] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -107,7 +118,8 @@ def load_dataset(
     joint: str | None = None,
     roles: Mapping[str, str] | None = None,
     min_samples: int = MIN_SAMPLES,
-    smooth_torque_s: float = SMOOTH_TAU_S,
+    smooth_torque_s: float | None = None,
+    dq_window: int | None = None,
 ) -> Dataset:
     """Read a log (file path, pyarrow Table or mapping of columns) into a :class:`Dataset`.
 
@@ -116,9 +128,11 @@ def load_dataset(
         joint: Joint of a servotau log (optional if it has one joint).
         roles: Column of each role (see the module doc), overriding the recognised layout.
         min_samples: Fewest valid samples accepted.
-        smooth_torque_s: Window [s] of the centred SG smoothing of the torque (0: none). A torque
-            estimate is noisy; without smoothing, any term that averages neighbouring samples (a lag, a
-            delay) would win by denoising it.
+        smooth_torque_s: Window [s] of the centred SG smoothing of the torque (0: none; None: chosen
+            from the torque's noise by :func:`cv_window`). A torque estimate is noisy; without smoothing,
+            any term that averages neighbouring samples (a lag, a delay) would win by denoising it.
+        dq_window: SG window [samples, odd] of the velocity when the log has no velocity column (None:
+            chosen from the encoder by :func:`cv_window`).
 
     Raises:
         IdentificationError: Missing or unknown column, unknown joint, too few samples, time not
@@ -167,6 +181,11 @@ def load_dataset(
             )
         dt = float(np.median(steps))
     runs = segments(used["time"] if "time" in roles else None, dt, valid=valid, max_gap=RUN_GAP)
+    if "time" in roles and dt is not None:
+        jumps = int(np.sum(np.diff(used["time"][valid]) > RUN_GAP * dt))
+        if jumps:
+            notes.append(f"time: {jumps} steps longer than {RUN_GAP} x the median period {1e3 * dt:.3g} ms "
+                         "(filters restart there)")
     if "velocity" not in roles:
         if "position" not in roles:
             raise IdentificationError("no velocity: expected a velocity column or a position column to differentiate")
@@ -178,16 +197,37 @@ def load_dataset(
             sig[_SIGNAL_OF_ROLE[role]] = arr[valid]
     if "acceleration" in roles:
         sig["ddq_est"] = sig["ddq"]  # the log's own acceleration replaces the filtered one of the effects
-    if "velocity" not in roles:
-        sig["dq"] = _differentiate(used["position"], runs, dt, 1, SG_WINDOW_S)[valid]
-        notes.append(f"dq: centred Savitzky-Golay derivative of q ({_window(SG_WINDOW_S, dt)} samples, order 2)")
+    wq = None
+    prep: dict[str, dict] = {}
+    if "position" in roles and dt is not None and not {"velocity", "acceleration"} <= set(roles):
+        wq = dq_window if dq_window is not None else cv_window(used["position"], runs, 2)
+    if "velocity" in roles:
+        notes.append(f"dq: the log's own velocity column '{roles['velocity']}'")
+        prep["dq"] = {"source": "log", "column": roles["velocity"]}
+    else:
+        w = wq
+        sig["dq"] = _differentiate(used["position"], runs, dt, 1, w)[valid]
+        how = "chosen by cross-validation on the encoder" if dq_window is None else "given"
+        prep["dq"] = {"source": "derivative of q", "window": int(w), "seconds": float(w * dt), "order": 2,
+                      "chosen": "cross-validation" if dq_window is None else "given"}
+        notes.append(f"dq: centred Savitzky-Golay derivative of q ({w} samples = {1e3 * w * dt:.3g} ms, order 2, "
+                     f"{how})")
     if "acceleration" not in roles and "position" in roles and dt is not None:
         pos = used["position"]
-        sig["ddq"] = lambda: _differentiate(pos, runs, dt, 2, SG_WINDOW_DDQ_S)[valid]
-    if "torque" in roles and smooth_torque_s > 0 and dt is not None:
-        sig["tau"] = _differentiate(used["torque"], runs, dt, 0, smooth_torque_s)[valid]
-        notes.append(f"tau: centred Savitzky-Golay smoothing ({_window(smooth_torque_s, dt)} samples, order 2, "
-                     "no delay)")
+        w2 = 2 * wq - 1
+        sig["ddq"] = lambda: _differentiate(pos, runs, dt, 2, w2)[valid]
+    if "torque" in roles and smooth_torque_s != 0 and dt is not None:
+        if smooth_torque_s is None:
+            wt = cv_window(used["torque"], runs, 2)
+            how = "chosen by cross-validation on the torque's noise"
+        else:
+            wt = _window(smooth_torque_s, dt)
+            how = "given"
+        sig["tau"] = _differentiate(used["torque"], runs, dt, 0, wt)[valid]
+        prep["tau"] = {"source": "smoothed", "window": int(wt), "seconds": float(wt * dt), "order": 2,
+                       "chosen": "cross-validation" if smooth_torque_s is None else "given"}
+        notes.append(f"tau: centred Savitzky-Golay smoothing ({wt} samples = {1e3 * wt * dt:.3g} ms, order 2, "
+                     f"no delay, {how})")
     if "target" in roles:
         target = used["target"][valid]
     else:
@@ -197,7 +237,26 @@ def load_dataset(
             sig[col] = arr[valid]
     n = int(valid.sum())
     segment = used["segment"][valid] if "segment" in roles else None
-    return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes))
+    return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes), prep)
+
+
+def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] | None:
+    """``ds`` with ``dq`` (and ``ddq``) differentiated with ``factor`` times the window (odd, at least
+    ``MIN_WINDOW``), and that window; None when the velocity is the log's own or the window cannot shrink.
+    The check of :func:`~.diagnose.diagnose` that a lag-like effect is not the differentiation's own lag."""
+    info = ds.preprocessing.get("dq", {})
+    if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
+        return None
+    w = max(MIN_WINDOW, int(round(factor * info["window"])) | 1)
+    if w >= info["window"]:
+        return None
+    t = ds.signals["t"] if "t" in ds.signals else None
+    runs = segments(t, ds.dt, valid=np.ones(ds.n, dtype=bool), max_gap=RUN_GAP)
+    q = ds.signals["q"]
+    cols = {"dq": _differentiate(q, runs, ds.dt, 1, w)}
+    if "ddq_est" not in ds.signals:
+        cols["ddq"] = _differentiate(q, runs, ds.dt, 2, 2 * w - 1)
+    return replace(ds, signals=ds.signals.with_columns(**cols)), w
 
 
 def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | None,
@@ -226,13 +285,62 @@ def _window(seconds: float, dt: float) -> int:
     return w if w % 2 else w + 1
 
 
-def _differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window_s: float) -> np.ndarray:
-    """Centred SG derivative of ``x`` on each run (order ``deriv + 1``, at least 2); runs shorter than the
-    window use a shorter window."""
+def _loo_coeffs(window: int, order: int) -> np.ndarray:
+    """Weights of the leave-one-out SG smoother: the polynomial of ``order`` fitted to the ``window - 1``
+    samples around the centre, without it, evaluated at the centre."""
+    h = window // 2
+    j = np.array([k for k in range(-h, h + 1) if k != 0], dtype=float)
+    a = np.vander(j / h, order + 1, increasing=True)
+    row = np.linalg.pinv(a)[0]  # value at offset 0
+    c = np.zeros(window)
+    c[np.arange(window) != h] = row
+    return c
+
+
+def cv_window(x: np.ndarray, runs: list[tuple[int, int]], order: int = 2, *,
+              min_window: int = MIN_WINDOW, max_window: int = MAX_WINDOW) -> int:
+    """SG window [samples, odd] chosen from the data: the one whose leave-one-out smoother (fitted on the
+    neighbours, not the sample) best predicts each sample of ``x`` (mean squared error over the interiors
+    of the runs). Noise pulls it longer, curvature shorter. Bounded by ``min_window`` and ``max_window``
+    and by a tenth of the longest run; the longest window within 2 % of the best error is taken (the
+    error is flat near its minimum; a longer window is less noisy for the derivative)."""
+    x = np.asarray(x, dtype=float)
+    longest = max((b - a for a, b in runs), default=0)
+    hi = min(max_window, longest // 10)
+    hi = hi if hi % 2 else hi - 1
+    lo = max(min_window, order + 3 if (order + 3) % 2 else order + 4)
+    if hi <= lo:
+        return lo
+    cands = sorted({int(round(w)) | 1 for w in np.geomspace(lo, hi, 16)})
+    errs = []
+    for w in cands:
+        c = _loo_coeffs(w, order)
+        sq, n = 0.0, 0
+        for a, b in runs:
+            seg = x[a:b]
+            if len(seg) < hi or not np.all(np.isfinite(seg)):
+                continue
+            pred = np.convolve(seg, c[::-1], mode="valid")
+            h0 = (hi - w) // 2  # the same interior for every window
+            r = seg[hi // 2: len(seg) - hi // 2] - pred[h0: len(pred) - h0]
+            sq += float(r @ r)
+            n += len(r)
+        errs.append(sq / n if n else np.inf)
+    errs = np.asarray(errs)
+    if not np.isfinite(errs).any():
+        return lo
+    best = float(np.min(errs))
+    ok = [w for w, e in zip(cands, errs, strict=True) if e <= 1.02 * best]
+    return max(ok)
+
+
+def _differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window: int) -> np.ndarray:
+    """Centred SG derivative of ``x`` on each run with a ``window`` of samples (order ``deriv + 1``, at
+    least 2); runs shorter than the window use a shorter window."""
     from servotau.signal.savgol import savgol_centred
 
     out = np.zeros_like(x)
-    w = _window(window_s, dt)
+    w = window if window % 2 else window + 1
     order = max(2, deriv + 1)
     for a, b in runs:
         m = b - a
@@ -285,5 +393,6 @@ def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float
         return ds, 0.0
     sig = ds.signals.with_columns(tau=shift(tau, best, fill="hold"))
     note = f"tau: advanced by {best * ds.dt * 1e3:.0f} ms to match the encoders (estimator delay)"
-    out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note))
+    out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note),
+                  ds.preprocessing)
     return out, best * ds.dt

@@ -1,0 +1,99 @@
+"""Preprocessing that adapts to the data (issue 18, item 1): windows chosen by cross-validation, the log's own
+velocity, and no lag-like false alarm on a clean log of a stiff plant (servotau/experiments/plant_family.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from servotau.identification.workbench import diagnose, load_dataset, parse_spec
+from servotau.identification.workbench.data import cv_window
+
+
+def _runs(n):
+    return [(0, n)]
+
+
+def _log(dt, noise, seed=0, duration=4.0, with_dq=False):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration, dt)
+    q = 0.3 * np.sin(2 * np.pi * 1.5 * t) + 0.1 * np.sin(2 * np.pi * 0.4 * t)
+    dq = 0.3 * 2 * np.pi * 1.5 * np.cos(2 * np.pi * 1.5 * t) + 0.1 * 2 * np.pi * 0.4 * np.cos(2 * np.pi * 0.4 * t)
+    tau = 5 * q + rng.normal(0, 0.05, len(t))
+    cols = {"t": t, "q": q + rng.normal(0, noise, len(t)), "q_des": q + tau / 1000, "tau": tau}
+    if with_dq:
+        cols["dq"] = dq
+    return cols
+
+
+def test_cv_window_shorter_when_faster_sampled_on_a_smooth_signal():
+    # the same smooth signal with the same little noise: the faster-sampled log gets a shorter window in time
+    fast, slow = _log(1e-3, 2e-6), _log(8e-3, 2e-6, duration=32.0)
+    w_fast = cv_window(fast["q"], _runs(len(fast["q"])))
+    w_slow = cv_window(slow["q"], _runs(len(slow["q"])))
+    assert w_fast * 1e-3 < w_slow * 8e-3
+    assert w_fast * 1e-3 < 0.041  # shorter than the former fixed window
+
+
+def test_cv_window_longer_on_a_noisier_signal():
+    quiet, noisy = _log(1e-3, 1e-6), _log(1e-3, 1e-3)
+    assert cv_window(noisy["q"], _runs(len(noisy["q"]))) > cv_window(quiet["q"], _runs(len(quiet["q"])))
+
+
+def test_log_velocity_used_when_present_and_said():
+    cols = _log(1e-3, 1e-5, with_dq=True)
+    ds = load_dataset(cols)
+    assert np.array_equal(ds.signals["dq"], cols["dq"])
+    assert any("log's own velocity column 'dq'" in n for n in ds.notes)
+
+
+def test_notes_give_windows_in_samples_and_seconds():
+    ds = load_dataset(_log(2e-3, 1e-5))
+    dq_note = next(n for n in ds.notes if n.startswith("dq:"))
+    tau_note = next(n for n in ds.notes if n.startswith("tau:"))
+    assert "samples =" in dq_note and "ms" in dq_note and "cross-validation" in dq_note
+    assert "samples =" in tau_note and "cross-validation" in tau_note
+
+
+def test_time_jumps_are_noted():
+    cols = _log(1e-3, 1e-5)
+    cols["t"] = cols["t"].copy()
+    cols["t"][2000:] += 0.05
+    ds = load_dataset(cols)
+    assert any(n.startswith("time: 1 steps longer") for n in ds.notes)
+
+
+def _plant_diagnosis(seed, hidden):
+    from servotau.experiments import plant_family as pf
+
+    plant = pf.draw_plant(seed, hidden=hidden, period=1e-3, duration=8.0)
+    (true,) = pf.simulate([plant], 8.0)
+    ds = load_dataset(dict(pf.measure(plant, true)))
+    return plant, ds, diagnose(ds, parse_spec("paper", ds.signals))
+
+
+def test_clean_stiff_plant_raises_no_lag_false_alarm():
+    plant, ds, d = _plant_diagnosis(6, ())
+    assert plant.K > 2000  # a stiff servo: the fixed 41 ms window named `delay` here
+    assert d.verdict != "missing_effect"
+    assert ds.preprocessing["dq"]["source"] == "derivative of q" and ds.preprocessing["dq"]["window"] < 41
+
+
+def test_lag_that_does_not_survive_a_faster_derivative_is_not_named():
+    _plant, _ds, d = _plant_diagnosis(0, ())  # clean: with the chosen window `delay` removes ~20 %
+    assert d.verdict != "missing_effect"
+    reasons = {c.effect: c.reason for c in d.ranking if not c.testable}
+    assert "differentiation's lag" in reasons["delay"]
+
+
+def test_true_delay_survives_the_faster_derivative():
+    _plant, _ds, d = _plant_diagnosis(3, ("delay",))
+    assert d.verdict == "missing_effect" and d.ranking[0].effect == "delay"
+
+
+def test_log_velocity_skips_the_faster_derivative_check():
+    cols = _log(1e-3, 1e-5, with_dq=True)
+    ds = load_dataset(cols)
+    assert ds.preprocessing["dq"] == {"source": "log", "column": "dq"}
+    from servotau.identification.workbench.data import faster_derivative
+
+    assert faster_derivative(ds) is None
