@@ -76,3 +76,28 @@ def test_servo_log_stays_in_microradians(capsys, tmp_path):
     assert main(["model", "diagnose", str(log), "--base", "coulomb", "--quiet", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["unit"] == {"quantity": "servo error", "name": "dq_err", "si": "rad",
                                                            "symbol": "urad", "scale": 1e6}
+
+
+def test_offset_term_stands_for_the_mean_off_zero(capsys, tmp_path):
+    """A friction table 0.2 N m off zero: with the offset (default for a non-servo target) the base holds it
+    and coulomb_asym is not added to stand in for it; --offset off leaves it to the effects."""
+    path = _friction_table(tmp_path / "f.csv")
+    assert main(["model", "diagnose", *_friction_args(path), "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert "offset" in out["model"] and out["coefficients"]["offset"] == pytest.approx(0.2, abs=0.02)
+    assert out["verdict"] == "no_missing_effect"  # coulomb_asym first, but gains nothing (measured -0.0 %)
+    assert main(["model", "diagnose", *_friction_args(path), "--offset", "off", "--json", "--quiet"]) == 0
+    off = json.loads(capsys.readouterr().out)
+    assert "offset" not in off["model"] and off["ranking"][0]["effect"] == "coulomb_asym"
+    assert out["heldout"]["rms"] < 0.5 * off["heldout"]["rms"]
+
+
+def test_offset_with_the_asymmetric_loss_and_off_on_servo_logs(capsys, tmp_path):
+    """The asymmetric loss fits the offset too; a servo log has none by default (its results unchanged)."""
+    path = _friction_table(tmp_path / "f.csv")
+    assert main(["model", "compare", *_friction_args(path), "--loss", "asymmetric", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["coefficients"]["offset"] == pytest.approx(0.2, abs=0.05)
+    log = write_table(synthetic_table(cogging_truth, seconds=4.0), tmp_path / "servo.parquet")
+    assert main(["model", "compare", str(log), "--base", "coulomb", "--json", "--quiet"]) == 0
+    assert "offset" not in json.loads(capsys.readouterr().out)["coefficients"]

@@ -7,6 +7,7 @@
 
 Common options: --map ROLE=COLUMN (column roles for other tables), --unit U (the target's unit when its
 role does not say it: a servo log's error is in rad, a torque or friction target in N m),
+--offset auto|on|off (a constant term in the base; auto: on unless the target is a servo error),
 --loss least_squares|asymmetric with --w, --folds, --plugin FILE.py (registers user effects), --report DIR (HTML + PNG),
 --rerun save:FILE|connect:ADDR|spawn, --json (one JSON object on stdout). Progress goes to stderr.
 """
@@ -91,6 +92,9 @@ def _common(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--unit", metavar="U",
                     help="unit of the target when its role does not say it (rad and 'N m' choose a prefix); "
                          "default: rad for a servo log, N m for a torque or friction column")
+    sp.add_argument("--offset", choices=("auto", "on", "off"), default="auto",
+                    help="a constant term in the base model (auto: on for a table whose target is not a servo "
+                         "error, off for servo logs)")
     sp.add_argument("--base", default="paper", help="base model: paper (k_tau, k_v), coulomb, or effects joined by +")
     sp.add_argument("--loss", default="least_squares", choices=("least_squares", "asymmetric"))
     sp.add_argument("--w", type=float, default=10.0, help="over-estimation weight of the asymmetric loss")
@@ -154,7 +158,8 @@ def run(args: argparse.Namespace) -> int:
         say(line)
     unit = unit_of(ds, args.unit)
     say(f"error: {unit.quantity} [{unit.si}], shown in {unit.symbol}")
-    spec = parse_spec(args.base, ds.signals)
+    offset = args.offset == "on" or (args.offset == "auto" and not ds.actuator)
+    spec = parse_spec(args.base, ds.signals, offset=offset)
     folds = folds_of(ds, args.folds)
     effects = None
     if getattr(args, "effects", None):
