@@ -101,3 +101,50 @@ def test_offset_with_the_asymmetric_loss_and_off_on_servo_logs(capsys, tmp_path)
     log = write_table(synthetic_table(cogging_truth, seconds=4.0), tmp_path / "servo.parquet")
     assert main(["model", "compare", str(log), "--base", "coulomb", "--json", "--quiet"]) == 0
     assert "offset" not in json.loads(capsys.readouterr().out)["coefficients"]
+
+
+def _friction_recordings(tmp_path, k=3):
+    """``k`` friction recordings of the same joint (different noise seeds and velocity profiles)."""
+    paths = []
+    for i in range(k):
+        rng = np.random.default_rng(i)
+        t = np.arange(0.0, 8.0, 0.004)
+        v = 0.4 * np.sin(2 * np.pi * (0.2 + 0.05 * i) * t) + 0.2 * np.sin(2 * np.pi * 0.9 * t + i)
+        f = 0.2 + 1.5 * np.tanh(v / 0.01) + 3.0 * v + 0.02 * rng.standard_normal(t.size)
+        paths.append(write_table({"t": t, "v": v, "friction": f}, tmp_path / f"rec{i}.csv"))
+    return paths
+
+
+def test_several_recordings_are_held_out_one_by_one(capsys, tmp_path):
+    """model diagnose a.csv b.csv c.csv: one segment per recording, the held-out blocks are the recordings."""
+    from servotau.identification.workbench.recordings import combine
+
+    paths = _friction_recordings(tmp_path)
+    roles = {"time": "t", "velocity": "v", "target": "friction"}
+    ds = combine([load_dataset(p, roles=roles) for p in paths])
+    assert ds.n == 3 * 2000 and list(np.unique(ds.segment)) == [0.0, 1.0, 2.0]
+    assert np.all(np.diff(ds.time) > 0)  # time continues across recordings
+    argv = [*map(str, paths), "--map", "time=t", "--map", "velocity=v", "--map", "target=friction", "--base",
+            "coulomb", "--json", "--quiet"]
+    assert main(["model", "diagnose", *argv]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["data"]["n"] == 6000 and "3 recordings" in out["data"]["notes"][0]
+    assert out["heldout"]["fit_percent"] > 95.0 and out["verdict"] == "no_missing_effect"
+
+
+def test_a_model_fitted_on_some_recordings_is_scored_on_another(capsys, tmp_path):
+    """--test LOG: the final model, fitted on the other recordings, scored on it (no refit)."""
+    a, b, c = _friction_recordings(tmp_path)
+    assert main(["model", "add", str(a), str(b), "--test", str(c), "--map", "time=t", "--map", "velocity=v",
+                 "--map", "target=friction", "--base", "coulomb", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["test"]["source"].endswith("rec2.csv") and out["test"]["n"] == 2000
+    assert out["test"]["rms"] < 0.03 and out["test"]["model"] == out["model"]
+    assert main(["model", "compare", str(a), "--test", str(c), "--map", "time=t", "--map", "velocity=v",
+                 "--map", "target=friction", "--quiet"]) == 0
+    assert "test " in capsys.readouterr().out
+    bad = write_table({"t": np.arange(0.0, 8.0, 0.008), "v": np.sin(np.arange(1000.0)), "friction": np.ones(1000)},
+                      tmp_path / "slow.csv")
+    assert main(["model", "diagnose", str(a), str(bad), "--map", "time=t", "--map", "velocity=v",
+                 "--map", "target=friction", "--quiet"]) == 2
+    assert "expected recordings at the same rate" in capsys.readouterr().err

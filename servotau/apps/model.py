@@ -1,10 +1,12 @@
 """servotau model compare|diagnose|add|simulate: the model workbench on the command line.
 
-    servotau model compare  LOG [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
-    servotau model diagnose LOG [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
-    servotau model add      LOG [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml [--dead-band holds]]
+    servotau model compare  LOG... [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
+    servotau model diagnose LOG... [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
+    servotau model add      LOG... [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml [--dead-band holds]]
     servotau model simulate OUT.parquet [--hidden EFFECT ...] [--cycles 4] [--seed 0]
 
+Several LOGs: one segment each (held out: leave-one-recording-out; --folds defaults to their number);
+LOG... is one or more logs; --test LOG scores the final model on a recording it was not fitted on.
 Common options: --map ROLE=COLUMN (column roles for other tables), --unit U (the target's unit when its
 role does not say it: a servo log's error is in rad, a torque or friction target in N m),
 --offset auto|on|off (a constant term in the base; auto: on unless the target is a servo error),
@@ -28,6 +30,7 @@ from servotau.identification.workbench.diagnose import MIN_GAIN, diagnose
 from servotau.identification.workbench.evaluate import DEFAULT_FOLDS, compare, folds_of
 from servotau.identification.workbench.ladder import add_effects, save_model
 from servotau.identification.workbench.model import FittedModel, parse_spec
+from servotau.identification.workbench.recordings import combine
 from servotau.identification.workbench.units import unit_of
 
 
@@ -85,7 +88,11 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def _common(sp: argparse.ArgumentParser) -> None:
-    sp.add_argument("log", help="log table (.parquet or .csv)")
+    sp.add_argument("log", nargs="+", help="log table(s) (.parquet or .csv); several: one segment each, held out "
+                                           "by recording")
+    sp.add_argument("--test", action="append", default=[], metavar="LOG",
+                    help="score the final model (fitted on the LOGs) on this recording too, not fitted on it "
+                         "(repeatable)")
     sp.add_argument("--joint", help="joint of a servotau log (q/<joint>, q_des/<joint>, est/tau/<joint>)")
     sp.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
                     help=f"column of a role, one of {', '.join(ROLES)} (repeatable)")
@@ -146,8 +153,11 @@ def run(args: argparse.Namespace) -> int:
     if dead_band and not args.save:
         raise IdentificationError(f"--dead-band {dead_band}: expected --save FILE (the dead band goes into the saved "
                                   "motor file)")
-    say(f"reading {args.log}")
-    ds = load_dataset(args.log, joint=args.joint, roles=_roles(args.map))
+    say(f"reading {', '.join(args.log)}")
+    roles = _roles(args.map)
+    ds = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.log])
+    if len(args.log) > 1 and args.folds == DEFAULT_FOLDS:
+        args.folds = len(args.log)
     if dead_band and ds.joint is None:
         raise IdentificationError(f"--dead-band {dead_band}: {ds.source} names no joint: expected a servotau log "
                                   "(its holds are read per joint, --joint J)")
@@ -213,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
                 tau += f" ({OFFLINE_ESTIMATE})"
             path = save_model(ladder, args.save, joint,
                               provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}",
-                              dead_band_log=args.log if dead_band else None)
+                              dead_band_log=args.log[0] if dead_band else None)
             out["saved"] = {"file": str(path), "joint": joint}
             say(f"saved {ladder.final.spec.label()} to {path} [{joint}]")
             if dead_band:
@@ -221,7 +231,15 @@ def run(args: argparse.Namespace) -> int:
 
                 d = MotorParameters.load_toml(path)[joint].extra["deadzone"].coefficient
                 out["saved"]["dead_band"] = d
-                say(f"deadzone: d = {1e3 * d:.3f} mrad on the holds of {args.log}")
+                say(f"deadzone: d = {1e3 * d:.3f} mrad on the holds of {args.log[0]}")
+    if args.test:
+        final = (ladder.rungs[-1].comparison.model if ladder is not None
+                 else comparison.model if comparison is not None else diagnosis.base.model)
+        test = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.test])
+        tested = compare(test, final, loss)
+        out["test"] = {"source": test.source, "n": test.n, "model": final.spec.label(),
+                       **_clean(tested.train.to_dict())}
+        say(f"scored on {test.source} (not fitted on it)")
     if args.report:
         page = _report(args.report, ds, comparison, diagnosis, ladder, out, unit)
         out["report"] = str(page)
@@ -286,7 +304,7 @@ def _rerun(target: str, ds, comparison, diagnosis, ladder, unit) -> None:
 
 def _print_human(out: dict, ladder, unit) -> None:
     print(f"model {out['model']}  (error: {unit.quantity} [{unit.symbol}])")
-    for part in ("train", "heldout"):
+    for part in ("train", "heldout", "test"):
         m = out.get(part)
         if m:
             print(f"  {part:8s} fit {m['fit_percent']:.1f} %  RMS {unit.show(m['rms'])}  "
