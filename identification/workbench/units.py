@@ -1,7 +1,7 @@
 """Units of the workbench's error: they follow the role of the target column.
 
 - an actuator log (``target = q_des - q``): the servo error [rad], shown in urad (RMS of the target
-  under 0.1 rad, every servo log) or mrad;
+  under 20 mrad) or mrad;
 - a table whose ``target`` role maps to a torque or friction column (its name holds ``tau``,
   ``torque``, ``friction``, ``effort`` or ``trq``): [N m], shown in mN m (RMS under 1 N m) or N m;
 - anything else: the unit the user names (``--unit``), shown as is (``--unit rad`` or ``--unit "N m"``
@@ -67,7 +67,7 @@ def unit_for(si: str, rms: float, quantity: str, name: str) -> Unit:
     """The shown unit of a target in ``si`` whose RMS is ``rms`` (a prefix for rad and N m)."""
     key = si.strip().lower()
     if key in _RAD_ALIASES:
-        if rms < 0.1:
+        if rms < 2e-2:
             return Unit(quantity, name, "rad", "urad", 1e6)
         return Unit(quantity, name, "rad", "mrad", 1e3)
     if key in _TORQUE_ALIASES:
