@@ -19,6 +19,7 @@ from .signals import Signals
 K_TAU = "k_tau"  # [rad/(N m)]
 K_V = "k_v"  # [rad/(rad/s)]
 K_C = "k_c"  # [rad]
+OFFSET = "offset"  # [unit of the target] a constant term (general tables: a friction torque's mean off zero)
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +44,8 @@ class ModelTerms:
         u_tau = c[K_TAU] * signals["tau"] if K_TAU in self.linear else zero
         u_v = c[K_V] * signals["dq"] if K_V in self.linear else zero
         u = u_tau + u_v
+        if OFFSET in self.linear:
+            u = u + c[OFFSET]
         for effect, shape in self.terms:
             eff = get_effect(effect)
             if not eff.uses_model:

@@ -1,6 +1,9 @@
 """A model of the workbench: the paper's linear part plus effect terms, its fit and its conversions.
 
-``dq_err = k_tau tau + k_v dq + sum_e c_e phi_e(signals; shape_e)``
+``dq_err = k_tau tau + k_v dq [+ offset] + sum_e c_e phi_e(signals; shape_e)``
+
+``offset`` is an optional constant term of the base (a general table's target may sit off zero; a servo
+log's base has none unless asked for, so its results are those without it).
 
 Terms whose regressor reads ``u`` (the model's servo error without such terms, see
 :meth:`FittedModel.context`) are fitted by a fixed point: ``u`` from the previous fit (first the model
@@ -17,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from servotau.actuator import EffectTerm, FitMetrics, Loss, ModelTerms, MotorModel, Signals, get_effect
-from servotau.actuator.terms import K_TAU, K_V
+from servotau.actuator.terms import K_TAU, K_V, OFFSET
 from servotau.errors import IdentificationError
 
 from ..asymmetric import asymmetric_cost
@@ -26,7 +29,7 @@ from ..regressors import Regressors
 from ..validation import MAX_CONDITION, MIN_SAMPLES_PER_PARAMETER, check_min_samples
 
 FIXED_POINT = 4
-LINEAR_SIGNAL = {K_TAU: "tau", K_V: "dq"}
+LINEAR_SIGNAL = {K_TAU: "tau", K_V: "dq", OFFSET: None}  # None: the constant column
 
 
 @dataclass(frozen=True)
@@ -80,20 +83,21 @@ class ModelSpec:
         return any(get_effect(t.effect).uses_model for t in self.terms)
 
 
-def linear_for(signals: Signals) -> tuple[str, ...]:
-    """The linear coefficients the signals allow: ``k_tau`` if there is a torque, ``k_v`` always."""
-    return tuple(k for k, s in LINEAR_SIGNAL.items() if s in signals)
+def linear_for(signals: Signals, offset: bool = False) -> tuple[str, ...]:
+    """The linear coefficients the signals allow: ``k_tau`` if there is a torque, ``k_v`` always, and
+    ``offset`` (a constant) if asked for."""
+    return tuple(k for k, s in LINEAR_SIGNAL.items() if (s in signals if s is not None else offset))
 
 
-def parse_spec(text: str | Sequence[str] | None, signals: Signals) -> ModelSpec:
+def parse_spec(text: str | Sequence[str] | None, signals: Signals, offset: bool = False) -> ModelSpec:
     """A model from ``"paper"`` (k_tau, k_v), ``"coulomb"`` (paper + coulomb) or names joined by ``+``/``,``
-    (e.g. ``"coulomb+deadzone"``; ``paper`` may appear and means nothing more)."""
-    linear = linear_for(signals)
-    if text is None:
-        return ModelSpec(linear)
-    parts = text if not isinstance(text, str) else text.replace(",", "+").split("+")
+    (e.g. ``"coulomb+deadzone"``; ``paper`` may appear and means nothing more; ``offset`` in the names, or
+    ``offset=True``, adds the constant term to the base)."""
+    parts = [] if text is None else text if not isinstance(text, str) else text.replace(",", "+").split("+")
     names = [p.strip() for p in parts if p.strip() and p.strip() != "paper"]
-    return ModelSpec(linear, tuple(Term(n) for n in names))
+    offset = offset or OFFSET in names
+    linear = linear_for(signals, offset)
+    return ModelSpec(linear, tuple(Term(n) for n in names if n != OFFSET))
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,6 +148,9 @@ class FittedModel:
             raise IdentificationError(
                 f"model {self.spec.label()}: a motor model needs k_tau and k_v: expected torque and velocity roles"
             )
+        if OFFSET in self.spec.linear:
+            raise IdentificationError(f"model {self.spec.label()}: a motor file holds no constant offset: "
+                                      "expected a model without it (--offset off)")
         k_c = None
         extra = {}
         for t in self.spec.terms:
@@ -173,7 +180,7 @@ def design(signals: Signals, spec: ModelSpec, ctx: Mapping[str, np.ndarray] | No
     Returns column names, the matrix and, per term, ``(effect, shape, column slice)``.
     """
     names = list(spec.linear)
-    cols = [signals[LINEAR_SIGNAL[k]] for k in spec.linear]
+    cols = [signals[LINEAR_SIGNAL[k]] if LINEAR_SIGNAL[k] is not None else np.ones(signals.n) for k in spec.linear]
     su = signals.with_columns(**ctx) if ctx is not None else signals
     slices = []
     for t in spec.terms:
@@ -228,12 +235,16 @@ def solve(
             x[keep] = solve([k for k, ok in zip(names, keep, strict=True) if ok], matrix[:, keep], target, loss, rows)
             return x
     if loss.kind != "least_squares":
+        if OFFSET in names:  # the fitting problem refuses a constant column: centre the others instead
+            return _solve_with_offset(names, a, b, loss)
         return fit_with_loss(Regressors(tuple(names), a), b, loss).x
     n, k = a.shape
     check_min_samples(n, MIN_SAMPLES_PER_PARAMETER * k, f"fit (coefficients {names})")
     ms = np.einsum("ij,ij->j", a, a) / n
     mean = a.sum(axis=0) / n
     for j in range(k):
+        if names[j] == OFFSET:
+            continue
         if not ms[j] > 0.0 or ms[j] - mean[j] ** 2 <= 1e-20 * ms[j]:
             raise IdentificationError(f"regressor column '{names[j]}' is zero or constant: no excitation")
     scale = np.sqrt(ms)
@@ -247,6 +258,32 @@ def solve(
             f"expected <= {MAX_CONDITION:g}"
         )
     return np.linalg.solve(gram, an.T @ b) / scale
+
+
+def _solve_with_offset(names: list[str], a: np.ndarray, b: np.ndarray, loss: Loss) -> np.ndarray:
+    """Asymmetric fit with an ``offset`` column: the offset searched (golden section on the loss, other
+    coefficients fitted for each offset), since the fitting problem refuses a constant column."""
+    j = names.index(OFFSET)
+    keep = [i for i in range(len(names)) if i != j]
+    rest = Regressors(tuple(names[i] for i in keep), a[:, keep])
+
+    def fit(c: float) -> tuple[float, np.ndarray]:
+        x = fit_with_loss(rest, b, loss, offset=np.full(b.size, c)).x
+        return asymmetric_cost(a[:, keep] @ x + c - b, b, loss.w), x
+
+    lo, hi = float(np.min(b)), float(np.max(b))
+    g = (np.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(30):
+        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        if fit(m1)[0] <= fit(m2)[0]:
+            hi = m2
+        else:
+            lo = m1
+    c = 0.5 * (lo + hi)
+    out = np.zeros(len(names))
+    out[keep] = fit(c)[1]
+    out[j] = c
+    return out
 
 
 def fold_coefficients(x: np.ndarray, spec: ModelSpec, slices) -> tuple[ModelSpec, dict[str, float]]:

@@ -21,9 +21,8 @@ from .data import Dataset, describe
 from .diagnose import Diagnosis
 from .evaluate import Comparison, Metrics
 from .ladder import Ladder
+from .units import Unit, unit_of
 from .views import ResidualViews, residual_views
-
-URAD = 1e6  # plots in micro-radians
 
 
 def _plt():
@@ -42,69 +41,69 @@ def _save(fig, path: Path) -> str:
     return path.name
 
 
-def _plot_timeseries(ds: Dataset, models: Sequence[tuple[str, Comparison]], path: Path) -> str:
+def _plot_timeseries(ds: Dataset, models: Sequence[tuple[str, Comparison]], path: Path, u: Unit) -> str:
     plt = _plt()
     fig, (a, b) = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
     t = ds.time
     step = max(1, ds.n // 20000)
-    a.plot(t[::step], URAD * ds.target[::step], "k", lw=0.8, label="measured")
+    a.plot(t[::step], u.scale * ds.target[::step], "k", lw=0.8, label="measured")
     for label, c in models:
         pred = c.heldout_prediction if c.heldout_prediction is not None else c.prediction
-        a.plot(t[::step], URAD * pred[::step], lw=0.8, label=f"{label} (held-out)")
-        b.plot(t[::step], URAD * (ds.target - pred)[::step], lw=0.6, label=label)
-    a.set_ylabel("dq_err [urad]")
+        a.plot(t[::step], u.scale * pred[::step], lw=0.8, label=f"{label} (held-out)")
+        b.plot(t[::step], u.scale * (ds.target - pred)[::step], lw=0.6, label=label)
+    a.set_ylabel(f"{u.name} [{u.symbol}]")
     a.legend(fontsize=7, loc="upper right")
-    b.set_ylabel("residual [urad]")
+    b.set_ylabel(f"residual [{u.symbol}]")
     b.set_xlabel("time [s]" if ds.dt else "sample")
     return _save(fig, path)
 
 
-def _band(ax, b, label):
-    ax.plot(b.centre, URAD * b.mean, ".-", label=label)
-    ax.fill_between(b.centre, URAD * (b.mean - b.std), URAD * (b.mean + b.std), alpha=0.15)
+def _band(ax, b, label, u: Unit):
+    ax.plot(b.centre, u.scale * b.mean, ".-", label=label)
+    ax.fill_between(b.centre, u.scale * (b.mean - b.std), u.scale * (b.mean + b.std), alpha=0.15)
 
 
-def _plot_views(views: Sequence[tuple[str, ResidualViews]], out: Path) -> dict[str, str]:
+def _plot_views(views: Sequence[tuple[str, ResidualViews]], out: Path, u: Unit) -> dict[str, str]:
     plt = _plt()
     files = {}
     fig, ax = plt.subplots(figsize=(8, 4))
     for label, v in views:
         for side, b in v.velocity.items():
-            _band(ax, b, f"{label} {side}")
+            _band(ax, b, f"{label} {side}", u)
     ax.set_xscale("symlog", linthresh=1e-3)
     ax.axhline(0, color="k", lw=0.5)
-    ax.set(xlabel="velocity [rad/s] (symlog)", ylabel="residual [urad]", title="residual against velocity")
+    ax.set(xlabel="velocity [rad/s] (symlog)", ylabel=f"residual [{u.symbol}]", title="residual against velocity")
     ax.legend(fontsize=7)
     files["velocity"] = _save(fig, out / "residual_velocity.png")
     if views[0][1].torque is not None:
         fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 4), squeeze=False)
         for ax, (label, v) in zip(axes[0], views, strict=True):
             for side, b in v.torque.items():
-                _band(ax, b, side)
+                _band(ax, b, side, u)
             ax.axhline(0, color="k", lw=0.5)
-            ax.set(xlabel="torque [N m]", ylabel="residual [urad]", title=f"{label}: against torque")
+            ax.set(xlabel="torque [N m]", ylabel=f"residual [{u.symbol}]", title=f"{label}: against torque")
             ax.legend(fontsize=7)
         files["torque"] = _save(fig, out / "residual_torque.png")
     if views[0][1].position is not None:
         fig, ax = plt.subplots(figsize=(8, 3.5))
         for label, v in views:
-            _band(ax, v.position, label)
-        ax.set(xlabel="position [rad]", ylabel="residual [urad]", title="residual against position")
+            _band(ax, v.position, label, u)
+        ax.set(xlabel="position [rad]", ylabel=f"residual [{u.symbol}]", title="residual against position")
         ax.legend(fontsize=7)
         files["position"] = _save(fig, out / "residual_position.png")
     fig, ax = plt.subplots(figsize=(8, 3.5))
     for label, v in views:
-        _band(ax, v.time, label)
-    ax.set(xlabel="time [s]", ylabel="residual [urad]", title="residual against time (window means)")
+        _band(ax, v.time, label, u)
+    ax.set(xlabel="time [s]", ylabel=f"residual [{u.symbol}]", title="residual against time (window means)")
     ax.legend(fontsize=7)
     files["time"] = _save(fig, out / "residual_time.png")
     if views[0][1].heatmap is not None:
         fig, axes = plt.subplots(1, len(views), figsize=(6 * len(views), 4.2), squeeze=False)
-        lim = max(np.nanmax(np.abs(v.heatmap)) for _, v in views) * URAD
+        lim = max(np.nanmax(np.abs(v.heatmap)) for _, v in views) * u.scale
         for ax, (label, v) in zip(axes[0], views, strict=True):
-            im = ax.pcolormesh(v.heatmap_dq_edges, v.heatmap_tau_edges, URAD * v.heatmap.T, cmap="RdBu_r",
+            im = ax.pcolormesh(v.heatmap_dq_edges, v.heatmap_tau_edges, u.scale * v.heatmap.T, cmap="RdBu_r",
                                vmin=-lim, vmax=lim)
-            ax.set(xlabel="velocity [rad/s]", ylabel="torque [N m]", title=f"{label}: mean residual [urad]")
+            ax.set(xlabel="velocity [rad/s]", ylabel="torque [N m]", title=f"{label}: mean residual [{u.symbol}]")
             fig.colorbar(im, ax=ax)
         files["heatmap"] = _save(fig, out / "heatmap.png")
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 3.5))
@@ -135,24 +134,24 @@ def _plot_ranking(d: Diagnosis, path: Path) -> str:
     return _save(fig, path)
 
 
-def _plot_ladder(lad: Ladder, path: Path) -> str:
+def _plot_ladder(lad: Ladder, path: Path, u: Unit) -> str:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 3.5))
     x = range(len(lad.rungs))
-    ax.plot(x, [URAD * r.comparison.train.rms for r in lad.rungs], "o-", label="training")
-    ax.plot(x, [URAD * r.comparison.heldout.rms for r in lad.rungs], "s-", label="held-out")
+    ax.plot(x, [u.scale * r.comparison.train.rms for r in lad.rungs], "o-", label="training")
+    ax.plot(x, [u.scale * r.comparison.heldout.rms for r in lad.rungs], "s-", label="held-out")
     ax.set_xticks(list(x), [r.added or "base" for r in lad.rungs])
-    ax.set(ylabel="RMS [urad]", title="ladder: error after each added effect")
+    ax.set(ylabel=f"RMS [{u.symbol}]", title="ladder: error after each added effect")
     ax.set_ylim(bottom=0)
     ax.legend()
     return _save(fig, path)
 
 
-def _metrics_row(label: str, m: Metrics | None) -> str:
+def _metrics_row(label: str, m: Metrics | None, u: Unit) -> str:
     if m is None:
         return f"<tr><td>{html.escape(label)}</td><td colspan=4>-</td></tr>"
-    return (f"<tr><td>{html.escape(label)}</td><td>{m.fit_percent:.1f}</td><td>{URAD * m.rms:.2f}</td>"
-            f"<td>{URAD**2 * m.asymmetric_loss:.3g}</td><td>{100 * m.overestimation_rate:.1f}</td></tr>")
+    return (f"<tr><td>{html.escape(label)}</td><td>{m.fit_percent:.1f}</td><td>{u.num(m.rms)}</td>"
+            f"<td>{u.scale**2 * m.asymmetric_loss:.3g}</td><td>{100 * m.overestimation_rate:.1f}</td></tr>")
 
 
 def _table(rows: list[list[str]], head: list[str]) -> str:
@@ -170,8 +169,13 @@ def write_report(
     ladder: Ladder | None = None,
     title: str = "servotau model workbench",
     summary: dict | None = None,
+    unit: Unit | None = None,
 ) -> Path:
-    """Write ``index.html`` and its plots into ``out_dir``; return the HTML path."""
+    """Write ``index.html`` and its plots into ``out_dir``; return the HTML path.
+
+    ``unit``: how errors are scaled and labelled (default: from the target's role, :func:`.units.unit_of`).
+    """
+    u = unit or unit_of(ds)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     models: list[tuple[str, Comparison]] = []
@@ -190,23 +194,25 @@ def write_report(
     parts.append("<h2>Model against measurement</h2>")
     rows = []
     for label, c in models:
-        rows.append(_metrics_row(f"{label} (training)", c.train))
-        rows.append(_metrics_row(f"{label} (held-out)", c.heldout))
-    parts.append("<table><tr><th>model</th><th>fit [%]</th><th>RMS [urad]</th><th>asymmetric loss [urad^2]</th>"
+        rows.append(_metrics_row(f"{label} (training)", c.train, u))
+        rows.append(_metrics_row(f"{label} (held-out)", c.heldout, u))
+    parts.append(f"<p>Error: {html.escape(u.quantity)} [{html.escape(u.symbol)}]</p>"
+                 f"<table><tr><th>model</th><th>fit [%]</th><th>RMS [{u.symbol}]</th>"
+                 f"<th>asymmetric loss [({u.symbol})^2]</th>"
                  "<th>over-estimation [%]</th></tr>" + "".join(rows) + "</table>")
     for label, c in models:
         parts.append(f"<p><b>{html.escape(label)}</b>: " + html.escape("; ".join(c.model.describe())) + "</p>")
-    files = {"timeseries": _plot_timeseries(ds, models, out / "timeseries.png")}
+    files = {"timeseries": _plot_timeseries(ds, models, out / "timeseries.png", u)}
     if ladder is not None and len(ladder.rungs) > 1:
-        files["ladder"] = _plot_ladder(ladder, out / "ladder.png")
-        rows = [[html.escape(r.label), html.escape(r.added or "-"), f"{URAD * r.comparison.train.rms:.2f}",
-                 f"{URAD * r.comparison.heldout.rms:.2f}", f"{r.comparison.heldout.fit_percent:.1f}"]
+        files["ladder"] = _plot_ladder(ladder, out / "ladder.png", u)
+        rows = [[html.escape(r.label), html.escape(r.added or "-"), u.num(r.comparison.train.rms),
+                 u.num(r.comparison.heldout.rms), f"{r.comparison.heldout.fit_percent:.1f}"]
                 for r in ladder.rungs]
-        parts += ["<h2>Ladder</h2>", _table(rows, ["model", "added", "training RMS [urad]", "held-out RMS [urad]",
-                                                   "held-out fit [%]"]), f'<img src="{files["ladder"]}">']
+        head = ["model", "added", f"training RMS [{u.symbol}]", f"held-out RMS [{u.symbol}]", "held-out fit [%]"]
+        parts += ["<h2>Ladder</h2>", _table(rows, head), f'<img src="{files["ladder"]}">']
     parts.append(f'<h2>Time series</h2><img src="{files["timeseries"]}">')
     views = [(label, residual_views(ds, c.residual)) for label, c in models]
-    vfiles = _plot_views(views, out)
+    vfiles = _plot_views(views, out, u)
     parts.append("<h2>Where the model fails (held-out residuals)</h2>")
     parts += [f'<img src="{f}">' for f in vfiles.values()]
     if diagnosis is not None:

@@ -1,12 +1,16 @@
 """servotau model compare|diagnose|add|simulate: the model workbench on the command line.
 
-    servotau model compare  LOG [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
-    servotau model diagnose LOG [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
-    servotau model add      LOG [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml [--dead-band holds]]
+    servotau model compare  LOG... [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
+    servotau model diagnose LOG... [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
+    servotau model add      LOG... [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml [--dead-band holds]]
     servotau model simulate OUT.parquet [--hidden EFFECT ...] [--cycles 4] [--seed 0]
 
-Common options: --map ROLE=COLUMN (column roles for other tables), --loss least_squares|asymmetric
-with --w, --folds, --plugin FILE.py (registers user effects), --report DIR (HTML + PNG),
+Several LOGs: one segment each (held out: leave-one-recording-out; --folds defaults to their number);
+LOG... is one or more logs; --test LOG scores the final model on a recording it was not fitted on.
+Common options: --map ROLE=COLUMN (column roles for other tables), --unit U (the target's unit when its
+role does not say it: a servo log's error is in rad, a torque or friction target in N m),
+--offset auto|on|off (a constant term in the base; auto: on unless the target is a servo error),
+--loss least_squares|asymmetric with --w, --folds, --plugin FILE.py (registers user effects), --report DIR (HTML + PNG),
 --rerun save:FILE|connect:ADDR|spawn, --json (one JSON object on stdout). Progress goes to stderr.
 """
 
@@ -26,6 +30,8 @@ from servotau.identification.workbench.diagnose import MIN_GAIN, diagnose
 from servotau.identification.workbench.evaluate import DEFAULT_FOLDS, compare, folds_of
 from servotau.identification.workbench.ladder import add_effects, save_model
 from servotau.identification.workbench.model import FittedModel, parse_spec
+from servotau.identification.workbench.recordings import combine
+from servotau.identification.workbench.units import unit_of
 
 
 def register(subparsers) -> None:
@@ -82,10 +88,20 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def _common(sp: argparse.ArgumentParser) -> None:
-    sp.add_argument("log", help="log table (.parquet or .csv)")
+    sp.add_argument("log", nargs="+", help="log table(s) (.parquet or .csv); several: one segment each, held out "
+                                           "by recording")
+    sp.add_argument("--test", action="append", default=[], metavar="LOG",
+                    help="score the final model (fitted on the LOGs) on this recording too, not fitted on it "
+                         "(repeatable)")
     sp.add_argument("--joint", help="joint of a servotau log (q/<joint>, q_des/<joint>, est/tau/<joint>)")
     sp.add_argument("--map", action="append", default=[], metavar="ROLE=COLUMN",
                     help=f"column of a role, one of {', '.join(ROLES)} (repeatable)")
+    sp.add_argument("--unit", metavar="U",
+                    help="unit of the target when its role does not say it (rad and 'N m' choose a prefix); "
+                         "default: rad for a servo log, N m for a torque or friction column")
+    sp.add_argument("--offset", choices=("auto", "on", "off"), default="auto",
+                    help="a constant term in the base model (auto: on for a table whose target is not a servo "
+                         "error, off for servo logs)")
     sp.add_argument("--base", default="paper", help="base model: paper (k_tau, k_v), coulomb, or effects joined by +")
     sp.add_argument("--loss", default="least_squares", choices=("least_squares", "asymmetric"))
     sp.add_argument("--w", type=float, default=10.0, help="over-estimation weight of the asymmetric loss")
@@ -137,8 +153,11 @@ def run(args: argparse.Namespace) -> int:
     if dead_band and not args.save:
         raise IdentificationError(f"--dead-band {dead_band}: expected --save FILE (the dead band goes into the saved "
                                   "motor file)")
-    say(f"reading {args.log}")
-    ds = load_dataset(args.log, joint=args.joint, roles=_roles(args.map))
+    say(f"reading {', '.join(args.log)}")
+    roles = _roles(args.map)
+    ds = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.log])
+    if len(args.log) > 1 and args.folds == DEFAULT_FOLDS:
+        args.folds = len(args.log)
     if dead_band and ds.joint is None:
         raise IdentificationError(f"--dead-band {dead_band}: {ds.source} names no joint: expected a servotau log "
                                   "(its holds are read per joint, --joint J)")
@@ -147,7 +166,10 @@ def run(args: argparse.Namespace) -> int:
         say(f"torque re-timed by {1e3 * shift:.0f} ms")
     for line in describe(ds):
         say(line)
-    spec = parse_spec(args.base, ds.signals)
+    unit = unit_of(ds, args.unit)
+    say(f"error: {unit.quantity} [{unit.si}], shown in {unit.symbol}")
+    offset = args.offset == "on" or (args.offset == "auto" and not ds.actuator)
+    spec = parse_spec(args.base, ds.signals, offset=offset)
     folds = folds_of(ds, args.folds)
     effects = None
     if getattr(args, "effects", None):
@@ -156,7 +178,8 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise IdentificationError(f"--effects: unknown effect(s) {unknown}: expected names among {effect_names()}")
     out: dict = {"command": args.model_command, "data": {"source": ds.source, "joint": ds.joint, "n": ds.n,
-                                                         "dropped_rows": ds.n_dropped, "notes": list(ds.notes)}}
+                                                         "dropped_rows": ds.n_dropped, "notes": list(ds.notes)},
+                 "unit": unit.to_dict()}
     comparison = diagnosis = ladder = None
     if args.model_command == "compare":
         if args.model:
@@ -200,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
                 tau += f" ({OFFLINE_ESTIMATE})"
             path = save_model(ladder, args.save, joint,
                               provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}",
-                              dead_band_log=args.log if dead_band else None)
+                              dead_band_log=args.log[0] if dead_band else None)
             out["saved"] = {"file": str(path), "joint": joint}
             say(f"saved {ladder.final.spec.label()} to {path} [{joint}]")
             if dead_band:
@@ -208,18 +231,26 @@ def run(args: argparse.Namespace) -> int:
 
                 d = MotorParameters.load_toml(path)[joint].extra["deadzone"].coefficient
                 out["saved"]["dead_band"] = d
-                say(f"deadzone: d = {1e3 * d:.3f} mrad on the holds of {args.log}")
+                say(f"deadzone: d = {1e3 * d:.3f} mrad on the holds of {args.log[0]}")
+    if args.test:
+        final = (ladder.rungs[-1].comparison.model if ladder is not None
+                 else comparison.model if comparison is not None else diagnosis.base.model)
+        test = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.test])
+        tested = compare(test, final, loss)
+        out["test"] = {"source": test.source, "n": test.n, "model": final.spec.label(),
+                       **_clean(tested.train.to_dict())}
+        say(f"scored on {test.source} (not fitted on it)")
     if args.report:
-        page = _report(args.report, ds, comparison, diagnosis, ladder, out)
+        page = _report(args.report, ds, comparison, diagnosis, ladder, out, unit)
         out["report"] = str(page)
         say(f"report: {page}")
     if args.rerun:
-        _rerun(args.rerun, ds, comparison, diagnosis, ladder)
+        _rerun(args.rerun, ds, comparison, diagnosis, ladder, unit)
         out["rerun"] = args.rerun
     if args.json:
         print(json.dumps(out, allow_nan=False, default=_jsonable))
     else:
-        _print_human(out, ladder)
+        _print_human(out, ladder, unit)
     return 0
 
 
@@ -256,26 +287,27 @@ def _clean(x):
     return x
 
 
-def _report(out_dir, ds, comparison, diagnosis, ladder, summary):
+def _report(out_dir, ds, comparison, diagnosis, ladder, summary, unit):
     from servotau.identification.workbench.report import write_report
 
-    return write_report(out_dir, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder, summary=summary)
+    return write_report(out_dir, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder, summary=summary,
+                        unit=unit)
 
 
-def _rerun(target: str, ds, comparison, diagnosis, ladder) -> None:
+def _rerun(target: str, ds, comparison, diagnosis, ladder, unit) -> None:
     from .model_rerun import log_to_rerun
     from .viewer import open_recording
 
     rec = open_recording(target, app_id="servotau_model")
-    log_to_rerun(rec, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder)
+    log_to_rerun(rec, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder, unit=unit)
 
 
-def _print_human(out: dict, ladder) -> None:
-    print(f"model {out['model']}")
-    for part in ("train", "heldout"):
+def _print_human(out: dict, ladder, unit) -> None:
+    print(f"model {out['model']}  (error: {unit.quantity} [{unit.symbol}])")
+    for part in ("train", "heldout", "test"):
         m = out.get(part)
         if m:
-            print(f"  {part:8s} fit {m['fit_percent']:.1f} %  RMS {1e6 * m['rms']:.2f} urad  "
+            print(f"  {part:8s} fit {m['fit_percent']:.1f} %  RMS {unit.show(m['rms'])}  "
                   f"over-estimation {100 * m['overestimation_rate']:.1f} %")
     if "verdict" in out:
         print(f"verdict: {out['verdict']}: {out['message']}")
@@ -286,5 +318,5 @@ def _print_human(out: dict, ladder) -> None:
     if ladder is not None:
         print("ladder:")
         for r in out["ladder"]:
-            print(f"  {r['model']:60s} train {1e6 * r['train_rms']:7.2f} urad  "
-                  f"held-out {1e6 * r['heldout_rms']:7.2f} urad")
+            print(f"  {r['model']:60s} train {unit.show(r['train_rms']):>12s}  "
+                  f"held-out {unit.show(r['heldout_rms']):>12s}")
