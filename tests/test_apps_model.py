@@ -8,7 +8,7 @@ from support.synthetic import cogging_truth, synthetic_table
 
 from servotau.cli import main
 from servotau.identification import MotorParameters
-from servotau.identification.workbench.data import write_table
+from servotau.identification.data import write_table
 
 
 @pytest.fixture(scope="module")

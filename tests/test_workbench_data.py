@@ -6,8 +6,9 @@ from support.synthetic import synthetic_table
 
 from servotau.errors import IdentificationError
 from servotau.identification.data import shift as shift_signal
+from servotau.identification.data import write_table
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
-from servotau.identification.workbench.data import align_torque, write_table
+from servotau.identification.workbench.data import align_torque
 
 
 def test_single_joint_table_from_parquet_and_csv_without_velocity(tmp_path):
@@ -145,7 +146,7 @@ def test_collected_log_gets_the_off_line_estimate_and_never_reads_the_ground_tru
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from servotau.identification.workbench.data import read_table
+    from servotau.identification.data import read_table
 
     assert not any(c.startswith("est/") for c in read_table(collected_log))
     ds = load_dataset(collected_log, joint="RLEG_JOINT3")

@@ -7,7 +7,8 @@ import pytest
 from support.synthetic import cogging_truth, synthetic_table
 
 from servotau.cli import main
-from servotau.identification.workbench.data import load_dataset, write_table
+from servotau.identification.data import write_table
+from servotau.identification.workbench.data import load_dataset
 from servotau.identification.workbench.units import unit_for, unit_of
 
 

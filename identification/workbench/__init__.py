@@ -20,9 +20,11 @@ from servotau.actuator import (
     unregister_effect,
 )
 
-from .data import Dataset, align_torque, load_dataset, write_table
+from ..data import write_table
+from ..data.folds import blocked_folds, folds_of
+from .data import Dataset, align_torque, load_dataset
 from .diagnose import MIN_GAIN, Candidate, Confusion, Diagnosis, diagnose
-from .evaluate import Comparison, Metrics, blocked_folds, compare, folds_of
+from .evaluate import Comparison, Metrics, compare
 from .ladder import Ladder, Rung, add_effects, save_model
 from .model import FittedModel, ModelSpec, Term, fit_spec, parse_spec, resolve_shapes
 from .views import ResidualViews, residual_views

@@ -41,12 +41,11 @@ import numpy as np
 from servotau.actuator.signals import Signals
 from servotau.errors import IdentificationError
 
-from ..data import ROLES, read_table, resolve_roles, segments, shift, table_columns, write_table
+from ..data import read_table, resolve_roles, segments, shift, table_columns
 from ..data.tables import servotau_joints
 
-__all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "ROLES", "SG_WINDOW_DDQ_S", "SG_WINDOW_S", "SMOOTH_TAU_S",
-           "Dataset", "align_torque", "cv_window", "describe", "faster_derivative", "load_dataset", "read_table",
-           "write_table"]
+__all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "SG_WINDOW_DDQ_S", "SG_WINDOW_S", "SMOOTH_TAU_S",
+           "Dataset", "align_torque", "cv_window", "describe", "faster_derivative", "load_dataset"]
 
 log = logging.getLogger(__name__)
 SG_WINDOW_S = 0.041  # [s] the former fixed velocity window (kept for reference; windows are now chosen from the data)

@@ -52,8 +52,9 @@ import numpy as np
 from servotau.actuator import Effect, Loss, excitation_report, resolve_effects
 from servotau.errors import IdentificationError
 
+from ..data.folds import Fold, folds_of
 from .data import Dataset, faster_derivative
-from .evaluate import Fold, compare, error_of, folds_of
+from .evaluate import compare, error_of
 from .model import FittedModel, ModelSpec, Term, fit_spec, resolve_shapes, solve
 from .probes import FoldBase, base_per_fold, probe_gains
 from .verdict import Candidate, Confusion, Diagnosis, verdict_of

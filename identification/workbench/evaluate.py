@@ -16,15 +16,14 @@ import numpy as np
 
 from servotau.actuator.loss import Loss
 
-from ..data.folds import DEFAULT_FOLDS, GUARD_S, Fold, blocked_folds, folds_of
+from ..data.folds import Fold, folds_of
 from ..metrics import overestimation_rate, signed_excess
 from .data import Dataset
 from .model import FittedModel, ModelSpec, fit_spec, resolve_shapes
 
 REPORT_W = 10.0  # over-estimation weight of the reported asymmetric loss when fitting by least squares
 
-__all__ = ["DEFAULT_FOLDS", "GUARD_S", "REPORT_W", "Comparison", "Fold", "Metrics", "asymmetric_mean", "blocked_folds",
-           "compare", "cross_validate", "error_of", "folds_of", "metrics"]
+__all__ = ["REPORT_W", "Comparison", "Metrics", "asymmetric_mean", "compare", "cross_validate", "error_of", "metrics"]
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,10 @@ from pathlib import Path
 from servotau.actuator import FitMetrics, Loss, MotorModel, MotorParameters, get_effect
 from servotau.errors import IdentificationError
 
+from ..data.folds import Fold, folds_of
 from .data import Dataset
 from .diagnose import MIN_GAIN, Diagnosis, diagnose
-from .evaluate import Comparison, Fold, compare, folds_of
+from .evaluate import Comparison, compare
 from .model import FittedModel, ModelSpec, Term, resolve_shapes
 from .verdict import _r
 

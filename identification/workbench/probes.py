@@ -16,8 +16,9 @@ import numpy as np
 from servotau.actuator import Loss
 from servotau.actuator.signals import delayed, ticks
 
+from ..data.folds import Fold
 from .data import SMOOTH_TAU_S, Dataset
-from .evaluate import Fold, error_of
+from .evaluate import error_of
 from .model import FittedModel, ModelSpec, design, fit_spec, solve
 
 MEMORY_HORIZON_S = SMOOTH_TAU_S

@@ -25,9 +25,11 @@ from pathlib import Path
 
 from servotau.actuator import Loss, effect_names
 from servotau.errors import IdentificationError
-from servotau.identification.workbench.data import OFFLINE_ESTIMATE, ROLES, align_torque, describe, load_dataset
+from servotau.identification.data import ROLES
+from servotau.identification.data.folds import DEFAULT_FOLDS, folds_of
+from servotau.identification.workbench.data import OFFLINE_ESTIMATE, align_torque, describe, load_dataset
 from servotau.identification.workbench.diagnose import MIN_GAIN, diagnose
-from servotau.identification.workbench.evaluate import DEFAULT_FOLDS, compare, folds_of
+from servotau.identification.workbench.evaluate import compare
 from servotau.identification.workbench.ladder import add_effects, save_model
 from servotau.identification.workbench.model import FittedModel, parse_spec
 from servotau.identification.workbench.recordings import combine
@@ -69,7 +71,7 @@ def register(subparsers) -> None:
 
 
 def run_simulate(args: argparse.Namespace) -> int:
-    from servotau.identification.workbench.data import write_table
+    from servotau.identification.data import write_table
     from servotau.simrobot.servo import EFFECTS
 
     from .simlog import ExcitationPlan, simulate_log
