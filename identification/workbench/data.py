@@ -44,13 +44,10 @@ from servotau.errors import IdentificationError
 from ..data import read_table, resolve_roles, segments, shift, table_columns
 from ..data.tables import servotau_joints
 
-__all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "SG_WINDOW_DDQ_S", "SG_WINDOW_S", "SMOOTH_TAU_S",
-           "Dataset", "align_torque", "cv_window", "describe", "faster_derivative", "load_dataset"]
+__all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "Dataset", "align_torque", "cv_window", "describe",
+           "faster_derivative", "load_dataset"]
 
 log = logging.getLogger(__name__)
-SG_WINDOW_S = 0.041  # [s] the former fixed velocity window (kept for reference; windows are now chosen from the data)
-SG_WINDOW_DDQ_S = 0.081  # [s] the former fixed acceleration window
-SMOOTH_TAU_S = 0.021  # [s] the former fixed torque smoothing (the memory probe's horizon)
 MIN_WINDOW = 5  # [samples] shortest SG window considered by cv_window
 MAX_WINDOW = 101  # [samples] longest SG window considered by cv_window
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)

@@ -17,11 +17,11 @@ from servotau.actuator import Loss
 from servotau.actuator.signals import delayed, ticks
 
 from ..data.folds import Fold
-from .data import SMOOTH_TAU_S, Dataset
+from .data import Dataset
 from .evaluate import error_of
 from .model import FittedModel, ModelSpec, design, fit_spec, solve
 
-MEMORY_HORIZON_S = SMOOTH_TAU_S
+MEMORY_HORIZON_S = 0.021  # [s] the memory probe's step h
 MEMORY_LAGS = (1, 2, 4)
 """The memory probe predicts the held-out residual from its own values ``k h`` earlier (``k`` in ``MEMORY_LAGS``,
 ``h`` = ``MEMORY_HORIZON_S`` [s], the torque's smoothing window): noise that the workbench's filters spread over
