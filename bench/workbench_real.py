@@ -231,7 +231,8 @@ def published(model: dict, kp: float) -> dict:
          "alpha": model.get("alpha", 1.0)}
     if "load_friction_motor" in model:
         p.update(mu_motor=model["load_friction_motor"], mu_external=model["load_friction_external"],
-                 mu_motor_s=model["load_friction_motor_stribeck"], mu_external_s=model["load_friction_external_stribeck"],
+                 mu_motor_s=model["load_friction_motor_stribeck"],
+                 mu_external_s=model["load_friction_external_stribeck"],
                  quad_motor=model["load_friction_motor_quad"], quad_external=model["load_friction_external_quad"])
     return p
 
