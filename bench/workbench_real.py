@@ -14,7 +14,8 @@ For every group and every recording held out in turn: the workbench (``servotau 
 greedy ladder, least squares, its own preprocessing) fitted on the other recordings and scored on the held-out
 one, and the baselines fitted by this file's own code (scipy least squares, no workbench code) on the same
 training recordings and scored on the same held-out samples, in the same unit (the servo error ``q_des - q``
-[rad]): RMS and fit % (``100 (1 - |y - model| / |y - mean y|)``). Also the workbench's ``diagnose`` verdict on
+[rad]): RMS and fit % (``100 (1 - |y - model| / |y - mean y|)``). Also: the workbench with the library's terms for
+M1's inertia and Coulomb friction named (``--effect elastic --effect coulomb``); its ``diagnose`` verdict on
 each recording alone and on each group (leave-one-recording-out), and, for the XL330, the published
 coefficients as they are (fitted by the authors on their logs: not held out).
 
@@ -41,6 +42,7 @@ from scipy.optimize import least_squares, lsq_linear
 from scipy.signal import savgol_filter
 
 from servotau.identification.workbench import add_effects, compare, diagnose, folds_of, load_dataset, parse_spec
+from servotau.identification.workbench.model import Term, design
 from servotau.identification.workbench.recordings import combine
 
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
@@ -282,6 +284,9 @@ def diagnose_recordings(recs: list[Recording]) -> dict:
     return verdict_of(diagnose(ds, parse_spec("paper", ds.signals, offset=not ds.actuator), folds=folds))
 
 
+M1_TERMS = ("elastic", "coulomb")  # the library's terms for M1's inertia torque and Coulomb friction
+
+
 def workbench_heldout(train: list[Recording], test: Recording, max_steps: int) -> dict:
     """The greedy ladder fitted on ``train``, its base and final models scored on ``test``."""
     ds = dataset(train)
@@ -290,11 +295,37 @@ def workbench_heldout(train: list[Recording], test: Recording, max_steps: int) -
     ts = load_dataset(test.columns, roles=test.roles)
     base = ladder.rungs[0].comparison.model
     final = ladder.final
+    named = add_effects(ds, spec, effects=M1_TERMS, folds=folds_of(ds, max(len(train), 2)), diagnose_final=False)
     return {"model": final.spec.label(), "added": [r.added for r in ladder.rungs[1:]],
             "rejected": [r.added for r in ladder.rejected], "verdict_on_training": ladder.verdict,
             "base": scores(ts.target, compare(ts, base).prediction),
             "final": scores(ts.target, compare(ts, final).prediction),
-            "coefficients": {k: float(v) for k, v in final.coefficients.items()}}
+            "coefficients": {k: float(v) for k, v in final.coefficients.items()},
+            "m1_terms": {"model": named.final.spec.label(), **scores(ts.target, compare(ts, named.final).prediction)}}
+
+
+JOIN_GUARD = 8  # [samples] each side of a join between two training recordings left out by join_check
+
+
+def join_check(train: list[Recording], test: Recording) -> dict:
+    """The workbench's own columns for M1 (k_tau, k_v, elastic at the baselines' window, plain-sign coulomb), solved
+    by plain least squares on the joined training recordings with and without the samples next to each join, and
+    scored on ``test``: the effects filter ``q`` across the join of two recordings (their acceleration spikes there)."""
+    ds = dataset(train)
+    ts = load_dataset(test.columns, roles=test.roles)
+    window = DDQ_WINDOW * float(np.median(np.diff(test.columns["t_s"])))
+    spec = parse_spec("paper", ds.signals).plus(Term("elastic", {"window": window, "lag": 0.0})).plus(
+        Term("coulomb", {"v_eps": 0.0}))
+    names, a, _ = design(ds.signals, spec, None)
+    a_test = design(ts.signals, spec, None)[1]
+    keep = np.ones(ds.n, dtype=bool)
+    for end in np.cumsum([len(r.target) for r in train])[:-1]:
+        keep[end - JOIN_GUARD:end + JOIN_GUARD] = False
+    out = {}
+    for label, rows in (("all_rows", np.ones(ds.n, dtype=bool)), ("without_joins", keep)):
+        x = np.linalg.lstsq(a[rows], ds.target[rows], rcond=None)[0]
+        out[label] = scores(ts.target, a_test @ x) | {"coefficients": dict(zip(names, x.tolist(), strict=True))}
+    return out
 
 
 def run_group(g: Group, max_steps: int, published_models: dict, say) -> dict:
@@ -323,6 +354,7 @@ def run_group(g: Group, max_steps: int, published_models: dict, say) -> dict:
             base["dead band (backlash)"] = scores(held.target, predict_deadband(p, held)) | {
                 "play_rad": 2 * p["sign_load"], "k_rad_per_load": p["load"]}
         row["baselines"] = base
+        row["join_check"] = join_check(train, held)
         row["diagnose"] = diagnose_recordings([held])
         rows.append(row)
     say(f"{g.dataset}/{g.name}: diagnose on all recordings (leave-one-recording-out)")
