@@ -47,6 +47,9 @@ def register(subparsers) -> None:
         _common(sp)
         if name == "compare":
             sp.add_argument("--model", metavar="TOML", help="evaluate this motor-parameter file (no refit)")
+            sp.add_argument("--any-target", action="store_true",
+                            help="with --model: score it even if it was fitted on another target or unit (e.g. a "
+                                 "friction-torque model on a servo-error log)")
         if name in ("diagnose", "add"):
             sp.add_argument("--effects", metavar="A,B", help="effects to rank (default: all registered)")
             sp.add_argument("--min-gain", type=float, default=MIN_GAIN, help="held-out gain that names an effect")
@@ -191,7 +194,11 @@ def run(args: argparse.Namespace) -> int:
             joint = ds.joint or (next(iter(params)) if len(params) == 1 else None)
             if joint is None:
                 raise IdentificationError(f"--model {args.model}: several joints {list(params)}: expected --joint")
-            given = FittedModel.from_motor_model(params[joint])
+            motor = params[joint]
+            if not args.any_target:
+                _same_target((motor.target, motor.unit), unit, f"--model {args.model} [{joint}]", ds.source)
+            given = FittedModel.from_motor_model(motor)
+            _has_signals(given, ds, f"--model {args.model} [{joint}]")
             comparison = compare(ds, given, loss)
             spec = given.spec
             say(f"model {spec.label()} from {args.model}")
@@ -225,8 +232,8 @@ def run(args: argparse.Namespace) -> int:
                 tau += f" ({OFFLINE_ESTIMATE})"
             path = save_model(ladder, args.save, joint,
                               provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}",
-                              dead_band_log=args.log[0] if dead_band else None)
-            out["saved"] = {"file": str(path), "joint": joint}
+                              dead_band_log=args.log[0] if dead_band else None, target=unit.quantity, unit=unit.si)
+            out["saved"] = {"file": str(path), "joint": joint, "target": unit.quantity, "unit": unit.si}
             say(f"saved {ladder.final.spec.label()} to {path} [{joint}]")
             if dead_band:
                 from servotau.actuator import MotorParameters
@@ -238,6 +245,9 @@ def run(args: argparse.Namespace) -> int:
         final = (ladder.rungs[-1].comparison.model if ladder is not None
                  else comparison.model if comparison is not None else diagnosis.base.model)
         test = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.test])
+        _same_target((unit.quantity, unit.si), unit_of(test, args.unit), f"the model fitted on {ds.source}",
+                     test.source)
+        _has_signals(final, test, f"the model fitted on {ds.source}")
         tested = compare(test, final, loss)
         out["test"] = {"source": test.source, "n": test.n, "model": final.spec.label(),
                        **_clean(tested.train.to_dict())}
@@ -254,6 +264,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_human(out, ladder, unit)
     return 0
+
+
+def _same_target(fitted: tuple[str, str], unit, model: str, log: str) -> None:
+    """Refuse to score a model of one target (``(quantity, unit)``) on a log of another."""
+    if fitted != (unit.quantity, unit.si):
+        raise IdentificationError(
+            f"{model} predicts {fitted[0]} [{fitted[1]}], {log}'s target is {unit.quantity} [{unit.si}]: expected "
+            "a log of the same target and unit (--map target=..., --unit U; --any-target to score it anyway)")
+
+
+def _has_signals(model: FittedModel, ds, name: str) -> None:
+    """Refuse a model that reads the torque on a log without one (its other signals are checked when evaluated)."""
+    if "k_tau" in model.spec.linear and "tau" not in ds.signals:
+        raise IdentificationError(f"{name} has k_tau: expected a torque column in {ds.source} (--map torque=COLUMN)")
 
 
 def _jsonable(x):
