@@ -268,8 +268,6 @@ def run(args: argparse.Namespace) -> int:
         final = (ladder.rungs[-1].comparison.model if ladder is not None
                  else comparison.model if comparison is not None else diagnosis.base.model)
         test = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.test])
-        _same_target((unit.quantity, unit.si), unit_of(test, args.unit), f"the model fitted on {ds.source}",
-                     test.source)
         _has_signals(final, test, f"the model fitted on {ds.source}")
         tested = compare(test, final, loss)
         out["test"] = {"source": test.source, "n": test.n, "model": final.spec.label(),
