@@ -20,19 +20,36 @@ File format (``version = 1``)::
     [joints.RLEG_JOINT3.extra.deadzone]   # optional, any number of terms
     coefficient = 0.001
     shape = { e_deadzone = 0.003 }
+
+A model of another target (``servotau model add ... --save`` on a friction or torque table) says what it
+predicts and in which unit ``U``; ``k_tau`` and ``k_c`` are then optional, ``offset`` is a constant term, and
+the signs of ``k_tau`` and ``k_v`` are free (they are checked only for a servo error)::
+
+    [joints.joint]
+    target = "torque"          # optional: "servo error" (default, q_des - q), "torque", or a column name
+    unit = "N m"               # optional: the target's unit U (default "rad")
+    k_v = 2.98                 # [U/(rad/s)]
+    k_c = 1.49                 # [U], optional
+    offset = 0.2               # [U], optional: a constant term
+    loss = "least_squares"
+    provenance = "friction.csv; servotau model add; least squares; tau: no torque"
+
+A key left out is a term not in the model (never 0). The controller and the torque estimator read a model
+only through :meth:`MotorParameters.servo_model`, which refuses one without ``k_tau``, with an ``offset``
+or of another target, naming the file, the joint and the key.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from servotau.config import Section, load_toml
-from servotau.errors import IdentificationError
+from servotau.errors import ConfigError, IdentificationError
 
 from .loss import LOSS_KINDS, Loss
-from .model import EffectTerm, FitMetrics, MotorModel
+from .model import SERVO_ERROR, SERVO_UNIT, EffectTerm, FitMetrics, MotorModel
 from .toml_writer import key as toml_key
 from .toml_writer import value as toml_value
 
@@ -41,9 +58,10 @@ FORMAT_VERSION = 1
 
 @dataclass(frozen=True)
 class MotorParameters(Mapping[str, MotorModel]):
-    """Motor models by joint name, saved to and loaded from TOML."""
+    """Motor models by joint name, saved to and loaded from TOML; ``source``: the file read (for errors)."""
 
     models: Mapping[str, MotorModel]
+    source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         for name, m in self.models.items():
@@ -55,6 +73,19 @@ class MotorParameters(Mapping[str, MotorModel]):
         if joint not in self.models:
             raise IdentificationError(f"joint '{joint}' has no motor model: expected one of {list(self.models)}")
         return self.models[joint]
+
+    def servo_model(self, joint: str) -> MotorModel:
+        """The model of ``joint`` for the controller or the torque estimator: a servo-error model with
+        ``k_tau`` and no offset (:meth:`MotorModel.servo_issue`).
+
+        Raises:
+            ConfigError: ``<file>: field 'joints.<joint>.<key>' ...: expected ...``.
+        """
+        m = self[joint]
+        issue = m.servo_issue()
+        if issue is not None:
+            raise ConfigError(f"{self.source or '<motor parameters>'}: field 'joints.{joint}.{issue[0]}' {issue[1]}")
+        return m
 
     def __contains__(self, joint: object) -> bool:
         return joint in self.models  # Mapping's default would turn the clear error above into a crash
@@ -70,13 +101,23 @@ class MotorParameters(Mapping[str, MotorModel]):
         lines = [
             "# servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
             "# Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
-            f"version = {FORMAT_VERSION}",
         ]
+        if any(_general(m) for m in self.models.values()):
+            lines.append("# A joint with 'target' and 'unit' U predicts that instead: k_tau [U/(N m)], "
+                         "k_v [U/(rad/s)], k_c, offset and rms [U]; a key left out is a term not in the model.")
+        lines.append(f"version = {FORMAT_VERSION}")
         for joint, m in self.models.items():
             table = f"joints.{toml_key(joint)}"
-            lines += ["", f"[{table}]", f"k_tau = {toml_value(m.k_tau)}", f"k_v = {toml_value(m.k_v)}"]
+            lines += ["", f"[{table}]"]
+            if not m.is_servo_error:
+                lines += [f"target = {toml_value(m.target)}", f"unit = {toml_value(m.unit)}"]
+            if m.k_tau is not None:
+                lines.append(f"k_tau = {toml_value(m.k_tau)}")
+            lines.append(f"k_v = {toml_value(m.k_v)}")
             if m.k_c is not None:
                 lines.append(f"k_c = {toml_value(m.k_c)}")
+            if m.offset is not None:
+                lines.append(f"offset = {toml_value(m.offset)}")
             lines.append(f"loss = {toml_value(m.loss.kind)}")
             if m.loss.w is not None:
                 lines.append(f"w = {toml_value(m.loss.w)}")
@@ -116,11 +157,22 @@ class MotorParameters(Mapping[str, MotorModel]):
         joints = root.section("joints")
         if not joints.keys():
             raise root.error("joints", {}, "at least one joint table")
-        return cls({name: _load_model(joints.section(name)) for name in joints.keys()})
+        return cls({name: _load_model(joints.section(name)) for name in joints.keys()}, source=root.file)
+
+
+def _general(m: MotorModel) -> bool:
+    return not m.is_servo_error or m.k_tau is None or m.offset is not None
 
 
 def _load_model(sec: Section) -> MotorModel:
-    sec.check_keys(["k_tau", "k_v", "k_c", "loss", "w", "provenance", "metrics", "extra"])
+    sec.check_keys(["target", "unit", "k_tau", "k_v", "k_c", "offset", "loss", "w", "provenance", "metrics",
+                    "extra"])
+    target, unit = sec.str("target", SERVO_ERROR), sec.str("unit", SERVO_UNIT)
+    for key, v in (("target", target), ("unit", unit)):
+        if not v.strip():
+            raise sec.error(key, v, "a non-empty string")
+    servo = target == SERVO_ERROR and unit == SERVO_UNIT
+    low = 0.0 if servo else None  # the paper's signs hold for a servo error only
     kind = sec.str("loss", choices=LOSS_KINDS)
     if kind == "asymmetric":
         loss = Loss(kind, sec.float("w", min=1.0, strict_min=True))
@@ -136,7 +188,7 @@ def _load_model(sec: Section) -> MotorModel:
         ms = sec.section("metrics")
         ms.check_keys(["rms", "overestimation_rate", "n_samples"])
         metrics = FitMetrics(
-            ms.float("rms", min=0.0, unit="rad"),
+            ms.float("rms", min=0.0, unit=unit),
             ms.float("overestimation_rate", min=0.0, max=1.0),
             ms.int("n_samples", min=0),
         )
@@ -147,11 +199,14 @@ def _load_model(sec: Section) -> MotorModel:
         shape = es.section("shape", {})
         extra[name] = EffectTerm(es.float("coefficient"), {k: shape.float(k) for k in shape.keys()})
     return MotorModel(
-        k_tau=sec.float("k_tau", min=0.0, strict_min=True, unit="rad/(N m)"),
-        k_v=sec.float("k_v", min=0.0, unit="rad/(rad/s)"),
-        k_c=sec.float("k_c", min=0.0, unit="rad") if "k_c" in sec else None,
+        k_tau=sec.float("k_tau", min=low, strict_min=servo, unit=f"{unit}/(N m)") if "k_tau" in sec else None,
+        k_v=sec.float("k_v", min=low, unit=f"{unit}/(rad/s)"),
+        k_c=sec.float("k_c", min=0.0, unit=unit) if "k_c" in sec else None,
         extra=extra,
         loss=loss,
         provenance=provenance,
         metrics=metrics,
+        offset=sec.float("offset", unit=unit) if "offset" in sec else None,
+        target=target,
+        unit=unit,
     )

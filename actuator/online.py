@@ -12,7 +12,11 @@ once per tick.
 An effect that reads the command of the current tick (``delay``) makes the model affine in ``q_des``:
 :meth:`OnlineModel.command` solves ``q_des = q + model(q_des)`` for the feedforward.
 
-The model is anything with ``k_tau``, ``k_v``, ``extra`` (effect terms with ``shape``) and ``terms()`` (a
+The model's linear part is that of its ``terms()``: ``k_tau tau`` only if the model has ``k_tau`` (else
+``tau`` is not read and may be None), ``k_v dq``, and the constant ``offset`` if it has one, on-line as in
+the batch evaluation.
+
+The model is anything with ``extra`` (effect terms with ``shape``) and ``terms()`` (a
 :class:`~servotau.actuator.terms.ModelTerms`): a :class:`~servotau.actuator.model.MotorModel`.
 """
 
@@ -27,7 +31,7 @@ from servotau.errors import IdentificationError
 
 from .registry import ONLINE_SIGNALS, get_effect
 from .signals import Signals
-from .terms import K_TAU, K_V
+from .terms import K_TAU, K_V, OFFSET
 
 BASE_SIGNALS = ("tau", "dq")
 MODEL_SIGNALS = ("u", "u_tau", "u_v")  # computed from the model, not given
@@ -52,7 +56,7 @@ def required_signals(model) -> list[str]:
 
 def predict_batch(
     model,
-    tau: np.ndarray,
+    tau: np.ndarray | None,
     dq: np.ndarray,
     *,
     q: np.ndarray | None = None,
@@ -62,21 +66,21 @@ def predict_batch(
     period: float | None = None,
     columns: Mapping[str, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """``model`` on arrays of samples [rad]; ``period`` [s] defaults to the median step of ``t``.
+    """``model`` on arrays of samples [unit of its target]; ``period`` [s] defaults to the median step of ``t``;
+    ``tau`` may be None if neither ``k_tau`` nor an effect reads it.
 
     Raises:
-        IdentificationError: An effect needs a signal that was not given (the message names both).
+        IdentificationError: A term needs a signal that was not given (the message names both).
     """
-    tau = np.asarray(tau, dtype=np.float64)
     dq = np.asarray(dq, dtype=np.float64)
-    n = len(tau)
-    cols: dict[str, np.ndarray] = {**(columns or {}), "tau": tau, "dq": dq}
-    for name, v in (("q", q), ("q_des", q_des), ("t", t), ("ddq", ddq), ("ddq_est", ddq)):
+    n = len(dq)
+    cols: dict[str, np.ndarray] = {**(columns or {}), "dq": dq}
+    for name, v in (("tau", tau), ("q", q), ("q_des", q_des), ("t", t), ("ddq", ddq), ("ddq_est", ddq)):
         if v is not None:
             cols[name] = np.asarray(v, dtype=np.float64)
     for name, v in cols.items():
         if v.shape != (n,):
-            raise IdentificationError(f"signal '{name}': shape {v.shape}: expected ({n},) like tau")
+            raise IdentificationError(f"signal '{name}': shape {v.shape}: expected ({n},) like dq")
     if period is None and "t" in cols and n > 1:
         period = float(np.median(np.diff(cols["t"])))
     _check_signals(model, cols, period)
@@ -84,6 +88,8 @@ def predict_batch(
 
 
 def _check_signals(model, cols: Mapping[str, object], period: float | None) -> None:
+    if K_TAU in model.terms().linear and "tau" not in cols:
+        raise IdentificationError("signal 'tau' missing: expected the torque [N m] (the model has k_tau)")
     for name, term in model.extra.items():
         eff = get_effect(name)
         need = [s for s in eff.signals_of(term.shape) if s not in MODEL_SIGNALS]
@@ -136,9 +142,13 @@ class OnlineModel:
             term = eff.online(shape, self.period) if eff.online is not None else _Stateless(eff, shape, self.period)
             self._terms.append((name, eff.uses_model, self._model_terms.coefficients[name], term))
         self.signals = ("tau", "dq", *required_signals(model))
+        lin = self._model_terms.linear
+        self._needs_tau = K_TAU in lin or any("tau" in get_effect(n).signals_of(s) for n, s in self._model_terms.terms)
 
-    def _sample(self, tau: float, dq: float, extra: Mapping[str, float]) -> dict[str, float]:
-        x = {"tau": float(tau), "dq": float(dq)}
+    def _sample(self, tau: float | None, dq: float, extra: Mapping[str, float]) -> dict[str, float]:
+        if tau is None and self._needs_tau:
+            raise IdentificationError("OnlineModel: tau = None: expected the torque [N m] (the model reads it)")
+        x = {"tau": 0.0 if tau is None else float(tau), "dq": float(dq)}
         for k, v in extra.items():
             if v is not None:
                 x[k] = float(v)
@@ -147,10 +157,10 @@ class OnlineModel:
         missing = [s for s in self.signals if s not in x]
         if missing:
             raise IdentificationError(f"OnlineModel: missing signal(s) {missing}: expected {list(self.signals)}")
-        c = self._model_terms.coefficients
-        x["u_tau"] = c[K_TAU] * x["tau"]
-        x["u_v"] = c[K_V] * x["dq"]
-        x["u"] = x["u_tau"] + x["u_v"]
+        c, lin = self._model_terms.coefficients, self._model_terms.linear
+        x["u_tau"] = c[K_TAU] * x["tau"] if K_TAU in lin else 0.0
+        x["u_v"] = c[K_V] * x["dq"] if K_V in lin else 0.0
+        x["u"] = x["u_tau"] + x["u_v"] + (c[OFFSET] if OFFSET in lin else 0.0)
         return x
 
     def _value(self, x: dict[str, float]) -> float:
@@ -165,19 +175,19 @@ class OnlineModel:
                 out += c * term.value(x)
         return out
 
-    def predict(self, tau: float, dq: float, **signals: float) -> float:
-        """The model [rad] at this tick, state not advanced."""
+    def predict(self, tau: float | None, dq: float, **signals: float) -> float:
+        """The model [its unit; rad for a servo error] at this tick, state not advanced."""
         return self._value(self._sample(tau, dq, signals))
 
-    def step(self, tau: float, dq: float, **signals: float) -> float:
-        """The model [rad] at this tick, then advance the state (once per tick)."""
+    def step(self, tau: float | None, dq: float, **signals: float) -> float:
+        """The model [its unit] at this tick, then advance the state (once per tick)."""
         x = self._sample(tau, dq, signals)
         out = self._value(x)
         for *_, term in self._terms:
             term.commit(x)
         return out
 
-    def command(self, q: float, tau: float, dq: float, **signals: float) -> float:
+    def command(self, q: float, tau: float | None, dq: float, **signals: float) -> float:
         """The command ``q_des`` [rad] with ``q_des - q = model(q_des)`` (the model is affine in ``q_des``),
         and advance the state with it."""
         if "q_des" not in self.signals:

@@ -238,7 +238,8 @@ class ControlConfig:
         motors_path = root.str("motors")
         try:
             motors_file = resolve_config_path(motors_path)
-            motors = dict(MotorParameters.load_toml(motors_file).models)
+            params = MotorParameters.load_toml(motors_file)
+            motors = dict(params.models)
         except ConfigError as err:
             raise ConfigError(f"{root.file}: field 'motors' = {motors_path!r}: {err}") from err
         _check_extra_terms(motors, motors_file, info.period)
@@ -252,6 +253,7 @@ class ControlConfig:
                 raise root.error("torque_joints", j, f"joints of {info.name}, among {list(names)}")
             if j not in motors:
                 raise root.error("torque_joints", j, f"joints with a motor model in {motors_path}: {list(motors)}")
+            params.servo_model(j)  # a servo-error model with k_tau: else an error naming the file, joint and key
         if len(set(torque_joints)) != len(torque_joints):
             raise root.error("torque_joints", torque_joints, "distinct joint names")
 

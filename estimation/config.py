@@ -123,7 +123,7 @@ def _prediction(pred: Section) -> PredictionSettings:
         raise pred.error("joints", joints, "a list of joint names")
     if any(j not in motors for j in joints):
         raise pred.error("joints", joints, f"joints with a motor model in {path}: {list(motors)}")
-    table = PredictionSettings.from_motors({j: motors[j] for j in joints})
+    table = PredictionSettings.from_motors({j: motors.servo_model(j) for j in joints})  # k_tau, else an error
     return load_dataclass(PredictionSettings, pred, ignore=["motors", "joints"], k_tau=table.k_tau, k_v=table.k_v)
 
 

@@ -33,7 +33,7 @@ def dead_bands(aligned, models: Mapping) -> dict[str, DeadBand]:
 def with_dead_bands(params: MotorParameters, aligned, source: str) -> tuple[MotorParameters, dict[str, DeadBand]]:
     """``params`` with each joint's ``deadzone`` term measured on the holds of ``aligned`` (:func:`dead_bands`,
     :func:`~servotau.actuator.effects.deadzone.with_dead_band`); and the dead bands."""
-    bands = dead_bands(aligned, params.models)
+    bands = dead_bands(aligned, {j: params.servo_model(j) for j in aligned.samples})  # k_tau, else an error
     models = {joint: with_dead_band(params[joint], db.d, provenance=f"{params[joint].provenance}; deadzone: "
                                     f"identification/deadband.py on the holds of {source}")
               for joint, db in bands.items()}

@@ -130,3 +130,76 @@ def test_membership_of_an_unknown_joint_is_false_and_lookup_names_it():
     assert "RLEG_JOINT3" in params and "LARM_JOINT0" not in params
     with _pytest.raises(IdentificationError, match="RLEG_JOINT0"):
         params["LARM_JOINT0"]
+
+
+def test_a_servo_model_file_keeps_its_format_byte_for_byte(tmp_path):
+    """A servo-error model with k_tau and no offset writes no target, unit or offset key (the format of every
+    existing motor file), and every shipped file reads as a servo-error model with k_tau."""
+    m = MotorModel(k_tau=5.1e-5, k_v=0.006561, k_c=1e-4, loss=Loss.asymmetric(10.0), provenance="test",
+                   metrics=FitMetrics(1e-4, 0.05, 1000))
+    text = MotorParameters({"RLEG_JOINT3": m}).save_toml(tmp_path / "m.toml").read_text()
+    assert text == (
+        "# servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]\n"
+        "# Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].\nversion = 1\n\n"
+        '[joints.RLEG_JOINT3]\nk_tau = 5.1e-05\nk_v = 0.006561\nk_c = 0.0001\nloss = "asymmetric"\nw = 10.0\n'
+        'provenance = "test"\n\n[joints.RLEG_JOINT3.metrics]\nrms = 0.0001\noverestimation_rate = 0.05\n'
+        "n_samples = 1000\n")
+    for f in sorted((CONFIG_DIR / "motors").glob("*.toml")):
+        p = MotorParameters.load_toml(f)
+        assert all(p.servo_model(j).k_tau > 0 and p[j].offset is None and p[j].is_servo_error for j in p)
+
+
+def test_a_model_without_k_tau_of_another_target_round_trips(tmp_path):
+    """k_tau None (not in the model), an offset, target and unit: saved and read back equal; the signs of
+    k_tau and k_v are free for a target that is not the servo error, checked for one that is."""
+    m = MotorModel(k_tau=None, k_v=-3.0, k_c=1.5, offset=0.2, provenance="friction.csv", target="torque", unit="N m")
+    path = MotorParameters({"J": m, "S": MotorModel(k_tau=-2.0, k_v=0.1, provenance="x", target="y", unit="A")}
+                           ).save_toml(tmp_path / "f.toml")
+    text = path.read_text()
+    assert "\n[joints.J]\ntarget = \"torque\"\nunit = \"N m\"\nk_v = -3.0\nk_c = 1.5\noffset = 0.2\n" in text
+    back = MotorParameters.load_toml(path)
+    assert back["J"] == m and back["S"].k_tau == -2.0 and back.source == str(path)
+    assert back["J"].terms().linear == ("k_v", "offset")
+    dq = np.array([-0.5, 0.0, 0.25])
+    np.testing.assert_allclose(back["J"].predict(None, dq), -3.0 * dq + 1.5 * np.sign(dq) + 0.2)
+    with pytest.raises(IdentificationError, match=r"k_v = -3.0: expected a finite number >= 0 \[rad/\(rad/s\)\]"):
+        MotorModel(k_tau=None, k_v=-3.0, provenance="x")
+    path.write_text(path.read_text().replace('target = "torque"\nunit = "N m"\n', ""))
+    with pytest.raises(ConfigError, match=r"field 'joints.J.k_v' = -3.0: expected a finite number >= 0"):
+        MotorParameters.load_toml(path)
+
+
+def test_the_controller_and_the_estimator_refuse_a_model_they_cannot_use(tmp_path):
+    """MotorParameters.servo_model, and through it the control and estimation configs, refuse a model without
+    k_tau, with an offset or of another target, naming the file, the joint and the key."""
+    import copy
+    import tomllib
+
+    from servotau.control.config import ControlConfig
+    from servotau.description import JOINT_NAMES, MODEL_PATH
+    from servotau.estimation.config import EstimatorConfig
+    from servotau.hal.types import RobotInfo
+
+    shipped = MotorParameters.load_toml(CONFIG_DIR / "motors" / "hrp2_sim_identified.toml")
+    m3 = shipped["RLEG_JOINT3"]
+    cases = {"k_tau": MotorModel(None, m3.k_v, m3.k_c, provenance="user"),
+             "offset": MotorModel(m3.k_tau, m3.k_v, offset=1e-4, provenance="user"),
+             "target": MotorModel(None, 3.0, offset=0.2, provenance="user", target="torque", unit="N m")}
+    with open(CONFIG_DIR / "control.toml", "rb") as f:
+        control = tomllib.load(f)
+    info = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
+    for key, bad in cases.items():
+        path = MotorParameters({**shipped.models, "RLEG_JOINT3": bad}).save_toml(tmp_path / f"{key}.toml")
+        expected = rf"^{path}: field 'joints\.RLEG_JOINT3\.{key}' "
+        with pytest.raises(ConfigError, match=expected):
+            MotorParameters.load_toml(path).servo_model("RLEG_JOINT3")
+        data = copy.deepcopy(control)
+        data["motors"] = str(path)
+        with pytest.raises(ConfigError, match=rf"joints\.RLEG_JOINT3\.{key}"):
+            ControlConfig.from_mapping(data, info)
+        est = tmp_path / f"est_{key}.toml"
+        est.write_text(f"[prediction]\nmotors = '{path}'\njoints = ['RLEG_JOINT3']\n")
+        with pytest.raises(ConfigError, match=rf"{path}: field 'joints\.RLEG_JOINT3\.{key}'"):
+            EstimatorConfig.from_toml(est)
+    with pytest.raises(IdentificationError, match=r"^here: field 'k_tau' missing: expected the torque gain k_tau > 0"):
+        cases["k_tau"].check_servo("here")

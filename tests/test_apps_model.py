@@ -127,3 +127,60 @@ def test_missing_column_and_nan_rows(capsys, tmp_path):
     out, _ = run_json(capsys, ["model", "diagnose", str(nan), "--base", "coulomb", "--json", "--quiet",
                                "--effects", "cogging"])
     assert out["data"]["dropped_rows"] == 3 and "dropped 3 of 3000 rows" in out["data"]["notes"][0]
+
+
+def _friction_csvs(tmp_path, k=3):
+    """``k`` recordings of one joint's friction torque [N m] = 0.2 + 1.5 sign(v) + 3 v + noise (no torque)."""
+    paths = []
+    for i in range(k):
+        rng = np.random.default_rng(i)
+        t = np.arange(0.0, 4.0, 0.004)
+        v = 0.4 * np.sin(2 * np.pi * (0.25 + 0.05 * i) * t) + 0.2 * np.sin(2 * np.pi * 0.9 * t + i)
+        f = 0.2 + 1.5 * np.tanh(v / 0.01) + 3.0 * v + 0.02 * rng.standard_normal(t.size)
+        paths.append(str(write_table({"t": t, "v": v, "friction": f}, tmp_path / f"rec{i}.csv")))
+    return paths
+
+
+FRICTION = ["--map", "time=t", "--map", "velocity=v", "--map", "target=friction", "--base", "coulomb", "--json",
+            "--quiet"]
+
+
+def test_a_friction_model_fitted_on_two_files_is_saved_and_scored_on_a_third(capsys, tmp_path):
+    """add a.csv b.csv --save m.toml (held out: each recording from the other), then compare c.csv --model m.toml:
+    the model (k_v + offset + coulomb, no k_tau) is scored on c without refitting; on a servo log it is refused
+    (naming both targets) unless --any-target."""
+    a, b, c = _friction_csvs(tmp_path)
+    saved = tmp_path / "m.toml"
+    out, _ = run_json(capsys, ["model", "add", a, b, *FRICTION, "--effects", "stribeck", "--save", str(saved)])
+    assert out["data"]["heldout_blocks"] == ["segment 0", "segment 1"] and out["heldout"]["rms"] < 0.03
+    assert out["saved"] == {"file": str(saved), "joint": "joint", "target": "torque", "unit": "N m"}
+    m = MotorParameters.load_toml(saved)["joint"]
+    assert (m.k_tau, m.target, m.unit) == (None, "torque", "N m") and m.offset == pytest.approx(0.2, abs=0.01)
+    out, _ = run_json(capsys, ["model", "compare", c, *FRICTION, "--model", str(saved)])
+    assert out["given"]["target"] == "torque" and out["model"] == "k_v + offset + coulomb"
+    assert out["train"]["rms"] < 0.03 and out["coefficients"]["offset"] == pytest.approx(m.offset, rel=1e-5)
+    servo = str(write_table(synthetic_table(seconds=2.0), tmp_path / "servo.csv"))
+    assert main(["model", "compare", servo, "--model", str(saved), "--quiet"]) == 2
+    assert (f"--model {saved} [joint] predicts torque [N m], {servo}'s target is servo error [rad]"
+            in capsys.readouterr().err)
+    out, _ = run_json(capsys, ["model", "compare", servo, "--model", str(saved), "--any-target", "--json",
+                               "--quiet"])
+    assert out["unit"]["si"] == "rad" and out["given"]["unit"] == "N m"
+
+
+def test_a_servo_model_without_k_tau_is_saved_and_reloaded(capsys, tmp_path):
+    """--base k_v+coulomb on a servo log with a torque column: the model has no k_tau, the file none either;
+    compare --model reads it back and predicts the same; naming k_tau on a table without torque is refused."""
+    log = str(write_table(synthetic_table(seconds=3.0), tmp_path / "servo.csv"))
+    saved = tmp_path / "s.toml"
+    out, _ = run_json(capsys, ["model", "add", log, "--base", "k_v+coulomb", "--effect", "coulomb_asym",
+                               "--effects", "stribeck", "--save", str(saved), "--json", "--quiet"])
+    assert out["model"] == "k_v + coulomb + coulomb_asym" and "k_tau" not in out["coefficients"]
+    m = MotorParameters.load_toml(saved)["joint"]
+    assert m.k_tau is None and m.is_servo_error and "k_tau" not in saved.read_text().split("version")[1]
+    again, _ = run_json(capsys, ["model", "compare", log, "--model", str(saved), "--json", "--quiet"])
+    assert again["model"] == out["model"] and again["train"]["rms"] == pytest.approx(out["train"]["rms"], rel=1e-6)
+    a, *_ = _friction_csvs(tmp_path, 1)
+    assert main(["model", "compare", a, "--map", "time=t", "--map", "velocity=v", "--map", "target=friction",
+                 "--base", "k_tau+coulomb", "--quiet"]) == 2
+    assert "['k_tau'] named, but the log has no torque" in capsys.readouterr().err

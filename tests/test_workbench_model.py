@@ -192,3 +192,79 @@ def test_greedy_step_that_raises_the_held_out_error_is_rejected_and_stops(monkey
     assert [r.added for r in lad.rungs] == [None] and [r.added for r in lad.rejected] == ["motor_lag"]
     assert lad.rejected[0].comparison.heldout.error > lad.rungs[0].comparison.heldout.error
     assert lad.final is lad.rungs[0].comparison.model and lad.to_dict()["rejected"][0]["added"] == "motor_lag"
+
+
+@pytest.mark.parametrize("effects", [("thermal_drift", "deadzone"), ("motor_lag", "cogging", "direction_gain")])
+def test_online_equals_batch_with_an_offset_and_without_k_tau(effects):
+    """A model with a constant offset and no k_tau: tick by tick equals MotorModel.predict (the offset enters
+    u, which the terms reading u see, on-line as in the batch), and tau is not needed unless a term reads it."""
+    c, ddq = signals(1.0)
+    m = MotorModel(k_tau=None, k_v=6e-3, k_c=1e-4, offset=3e-4,
+                   extra={e: EffectTerm(model_with(e).extra[e].coefficient, SHAPES[e]) for e in effects},
+                   provenance="test")
+    batch = m.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq, period=1e-3)
+    with_k_tau = MotorModel(**{**m.__dict__, "k_tau": 5e-5})
+    shifted = with_k_tau.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq, period=1e-3)
+    assert np.max(np.abs(shifted - batch)) > 1e-4  # the torque term is really absent, not hidden
+    online = m.online(1e-3)
+    ticks = [online.step(c["tau"][k], c["dq"][k], q=c["q"][k], q_des=c["q_des"][k], t=c["t"][k], ddq=ddq[k])
+             for k in range(len(c["t"]))]
+    np.testing.assert_allclose(ticks, batch, rtol=1e-9, atol=1e-15)
+    plain = MotorModel(k_tau=None, k_v=6e-3, offset=3e-4, provenance="test")
+    np.testing.assert_allclose(plain.predict(None, c["dq"]), 6e-3 * c["dq"] + 3e-4)
+    on = plain.online(1e-3)
+    assert [on.step(None, v) for v in c["dq"][:5]] == pytest.approx(list(6e-3 * c["dq"][:5] + 3e-4), abs=1e-18)
+    with pytest.raises(IdentificationError, match="tau = None"):
+        MotorModel(k_tau=5e-5, k_v=6e-3, provenance="test").online(1e-3).step(None, 0.1)
+
+
+def _friction_dataset(seed=0, seconds=6.0):
+    """A friction table: torque [N m] = 0.2 + 1.5 sign + 3 v + noise (no torque column: no k_tau)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 0.004)
+    v = 0.4 * np.sin(2 * np.pi * (0.2 + 0.05 * seed) * t) + 0.2 * np.sin(2 * np.pi * 0.9 * t + seed)
+    f = 0.2 + 1.5 * np.tanh(v / 0.01) + 3.0 * v + 0.02 * rng.standard_normal(t.size)
+    return load_dataset({"t": t, "v": v, "friction": f}, roles={"time": "t", "velocity": "v", "target": "friction"})
+
+
+def test_a_friction_model_without_k_tau_with_an_offset_round_trips_through_the_file(tmp_path):
+    """k_v + offset + coulomb (smoothed) fitted on a friction torque: saved with its target, unit and offset and without
+    k_tau; reloaded, it predicts the same, batch and on-line; the controller's check refuses it."""
+    from servotau.errors import ConfigError
+
+    ds = _friction_dataset()
+    spec = ModelSpec(("k_v", "offset"), (Term("coulomb", {"v_eps": 0.01}),))
+    lad = add_effects(ds, spec, diagnose_final=False, effects=[])
+    path = save_model(lad, tmp_path / "f.toml", "J1", provenance="test", target="torque", unit="N m")
+    text = path.read_text()
+    assert "k_tau" not in text.split("version")[1] and 'target = "torque"' in text and 'unit = "N m"' in text
+    m = MotorParameters.load_toml(path)["J1"]
+    assert (m.k_tau, m.target, m.unit) == (None, "torque", "N m")
+    assert m.offset == pytest.approx(0.2, abs=0.01) and m.k_c is None  # a smoothed sign: an extra term
+    assert m.extra["coulomb"].coefficient == pytest.approx(1.5, abs=0.05) and m.k_v == pytest.approx(3.0, abs=0.05)
+    s = ds.signals
+    batch = m.predict(None, s["dq"])
+    np.testing.assert_allclose(batch, lad.final.predict(s), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(FittedModel.from_motor_model(m).predict(s), batch, rtol=1e-12, atol=1e-12)
+    on = m.online(ds.dt)
+    np.testing.assert_allclose([on.step(None, v) for v in s["dq"]], batch, rtol=1e-12, atol=1e-12)
+    with pytest.raises(ConfigError, match=r"f\.toml: field 'joints\.J1\.target' = 'torque' \[N m\]: expected"):
+        MotorParameters.load_toml(path).servo_model("J1")
+
+
+def test_two_recordings_are_each_held_out_from_the_other():
+    """Two recordings: two folds, each recording predicted by a model fitted on the other (not halves of the
+    joined samples); any number of recordings likewise."""
+    from servotau.identification.data.folds import folds_of
+    from servotau.identification.workbench.recordings import combine
+
+    parts = [_friction_dataset(i, seconds=s) for i, s in enumerate((6.0, 3.0, 4.0))]
+    for k in (2, 3):
+        ds = combine(parts[:k])
+        folds = folds_of(ds, k)
+        assert [f.label for f in folds] == [f"segment {i}" for i in range(k)]
+        starts = np.cumsum([0] + [p.n for p in parts[:k]])
+        for i, f in enumerate(folds):
+            np.testing.assert_array_equal(f.test, np.arange(starts[i], starts[i + 1]))
+            assert not f.train[f.test].any() and f.train[np.setdiff1d(np.arange(ds.n), f.test)].sum() > 0.8 * (
+                ds.n - f.test.size)

@@ -6,8 +6,10 @@ holds out contiguous blocks, never random samples. The two callers keep their ow
 - :func:`holdout_split` (``servotau identify fit``): one split; blocks of ``block`` seconds of the log's time,
   every ``every``-th held out, no guard; then every ``downsample``-th valid sample of each set.
 - :func:`blocked_folds` (the workbench): ``folds`` blocks, each predicted by a model fitted on the others; the
-  blocks are of equal sample count (or groups of the log's ``segment`` labels), a guard band of ``guard``
-  samples on each side is removed from training, and nothing is downsampled.
+  blocks are the log's ``segment`` labels when it has at least two (consecutive segments grouped into at
+  most ``folds`` blocks: with as many folds as segments, leave-one-segment-out, which is how several
+  recordings are held out), else of equal sample count; a guard band of ``guard`` samples on each side is
+  removed from training, and nothing is downsampled.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from servotau.errors import IdentificationError
 
 DEFAULT_FOLDS = 5
 GUARD_S = 0.1  # [s]
+MIN_SEGMENTS = 2  # segments that make the folds (two recordings: each held out, fitted on the other)
 
 
 def time_blocks(t: np.ndarray, block: float) -> np.ndarray:
@@ -49,8 +52,9 @@ class Fold:
 
 
 def blocked_folds(n: int, folds: int = DEFAULT_FOLDS, segment: np.ndarray | None = None, guard: int = 0) -> list[Fold]:
-    """Contiguous held-out blocks: by ``segment`` label (consecutive labels grouped into ``folds``
-    blocks) if given with at least 3 labels, else ``folds`` blocks of equal length."""
+    """Contiguous held-out blocks: by ``segment`` label (consecutive labels grouped into at most ``folds``
+    blocks) if given with at least 2 labels (two segments: each predicted by a model fitted on the other),
+    else ``folds`` blocks of equal length."""
     if folds < 2:
         raise IdentificationError(f"folds = {folds}: expected at least 2 held-out blocks")
     bounds: list[tuple[int, int, str]] = []
@@ -58,7 +62,7 @@ def blocked_folds(n: int, folds: int = DEFAULT_FOLDS, segment: np.ndarray | None
         change = np.flatnonzero(np.diff(segment) != 0) + 1
         starts = np.concatenate([[0], change])
         ends = np.concatenate([change, [n]])
-        if len(starts) >= 3:
+        if len(starts) >= MIN_SEGMENTS:
             groups = np.array_split(np.arange(len(starts)), min(folds, len(starts)))
             for g in groups:
                 a, b = int(starts[g[0]]), int(ends[g[-1]])

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from servotau.actuator import FitMetrics, Loss, MotorModel, MotorParameters, get_effect
+from servotau.actuator.model import SERVO_ERROR, SERVO_UNIT
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
@@ -182,22 +183,31 @@ def save_model(
     provenance: str,
     metrics: FitMetrics | None = None,
     dead_band_log: str | Path | None = None,
+    target: str = SERVO_ERROR,
+    unit: str = SERVO_UNIT,
 ) -> Path:
-    """Write the model into the motor-parameter file ``path`` under ``joint`` (other joints of an
-    existing file are kept).
+    """Write the model of ``target`` in ``unit`` (the dataset's, e.g. from
+    :func:`~servotau.identification.workbench.units.unit_of`: ``quantity`` and ``si``) into the motor-parameter
+    file ``path`` under ``joint`` (other joints of an existing file are kept). Terms not in the model (``k_tau``
+    of a table without torque) are left out of the file; an ``offset`` is saved.
 
     ``dead_band_log``: a servotau log whose holds give the joint's ``deadzone`` term instead of the fitted one
     (:func:`~servotau.identification.deadband.with_log_dead_bands`, with the model's ``k_tau``): the motor file
-    of the controller in one step."""
+    of the controller in one step.
+
+    Raises:
+        IdentificationError: With ``dead_band_log``, the model is not a servo-error model with ``k_tau``."""
     if isinstance(ladder_or_model, Ladder):
         model = ladder_or_model.final
         train = ladder_or_model.rungs[-1].comparison.train
         metrics = metrics or FitMetrics(train.rms, train.overestimation_rate, train.n)
     else:
         model = ladder_or_model
-    motor = model.to_motor_model(provenance, metrics)
+    motor = model.to_motor_model(provenance, metrics, target=target, unit=unit)
     if dead_band_log is not None:
         from ..deadband import with_log_dead_bands
+
+        motor.check_servo(f"dead band from {dead_band_log}: model {model.spec.label()}")
 
         motor = with_log_dead_bands(MotorParameters({joint: motor}), dead_band_log)[0][joint]
     p = Path(path)

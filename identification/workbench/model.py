@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from servotau.actuator import EffectTerm, FitMetrics, Loss, ModelTerms, MotorModel, Signals, get_effect
+from servotau.actuator import FitMetrics, Loss, ModelTerms, MotorModel, Signals, get_effect
+from servotau.actuator.model import SERVO_ERROR, SERVO_UNIT
 from servotau.actuator.terms import K_TAU, K_V, OFFSET
 from servotau.errors import IdentificationError
 
@@ -137,32 +138,10 @@ class FittedModel:
         lines += [f"{t.label()}: {self.coefficients[t.effect]:.6g}" for t in self.spec.terms]
         return lines
 
-    def to_motor_model(self, provenance: str, metrics: FitMetrics | None = None) -> MotorModel:
-        """The motor-parameter entry: ``coulomb`` with a plain sign and a coefficient >= 0 becomes ``k_c``,
-        every other term an extra term with its shape.
-
-        Raises:
-            IdentificationError: The model has no ``k_tau`` (a table without torque), or ``k_tau <= 0``.
-        """
-        if K_TAU not in self.spec.linear or K_V not in self.spec.linear:
-            raise IdentificationError(
-                f"model {self.spec.label()}: a motor model needs k_tau and k_v: expected torque and velocity roles"
-            )
-        if OFFSET in self.spec.linear:
-            raise IdentificationError(f"model {self.spec.label()}: a motor file holds no constant offset: "
-                                      "expected a model without it (--offset off)")
-        k_c = None
-        extra = {}
-        for t in self.spec.terms:
-            c = self.coefficients[t.effect]
-            if t.effect == "coulomb" and t.shape.get("v_eps", 0.0) == 0.0 and c >= 0.0:
-                k_c = c
-            else:
-                extra[t.effect] = EffectTerm(c, t.shape)
-        k_v = self.coefficients[K_V]
-        if k_v < 0:
-            raise IdentificationError(f"fitted k_v = {k_v:.3g}: expected >= 0 for a motor model; check the data")
-        return MotorModel(self.coefficients[K_TAU], k_v, k_c, extra, self.loss, provenance, metrics)
+    def to_motor_model(self, provenance: str, metrics: FitMetrics | None = None, target: str = SERVO_ERROR,
+                       unit: str = SERVO_UNIT) -> MotorModel:
+        """The motor-parameter entry of a model of ``target`` in ``unit`` (:meth:`MotorModel.from_terms`)."""
+        return MotorModel.from_terms(self.terms(), self.loss, provenance, metrics, target=target, unit=unit)
 
     @classmethod
     def from_motor_model(cls, m: MotorModel) -> FittedModel:

@@ -1,12 +1,14 @@
 """servotau model compare|diagnose|add|simulate: the model workbench on the command line.
 
-    servotau model compare  LOG... [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml]
+    servotau model compare  LOG... [--joint J] [--base paper|coulomb|EFFECT+...] [--model motors.toml [--any-target]]
     servotau model diagnose LOG... [--joint J] [--base ...] [--effects a,b] [--min-gain 0.1]
     servotau model add      LOG... [--joint J] [--base ...] [--effect NAME ...] [--save motors.toml [--dead-band holds]]
     servotau model simulate OUT.parquet [--hidden EFFECT ...] [--cycles 4] [--seed 0]
 
 Several LOGs: one segment each (held out: leave-one-recording-out; --folds defaults to their number);
 LOG... is one or more logs; --test LOG scores the final model on a recording it was not fitted on.
+--save writes what the model predicts (servo error [rad], torque [N m], a column in --unit), its offset, and
+no k_tau if it has none; compare --model refuses a model of another target unless --any-target.
 Common options: --map ROLE=COLUMN (column roles for other tables), --unit U (the target's unit when its
 role does not say it: a servo log's error is in rad, a torque or friction target in N m),
 --offset auto|on|off (a constant term in the base; auto: on unless the target is a servo error),
@@ -24,6 +26,7 @@ import time
 from pathlib import Path
 
 from servotau.actuator import Loss, effect_names
+from servotau.actuator.terms import K_TAU, K_V, OFFSET
 from servotau.errors import IdentificationError
 from servotau.identification.data import ROLES
 from servotau.identification.data.folds import DEFAULT_FOLDS, folds_of
@@ -31,7 +34,7 @@ from servotau.identification.workbench.data import OFFLINE_ESTIMATE, align_torqu
 from servotau.identification.workbench.diagnose import MIN_GAIN, diagnose
 from servotau.identification.workbench.evaluate import compare
 from servotau.identification.workbench.ladder import add_effects, save_model
-from servotau.identification.workbench.model import FittedModel, parse_spec
+from servotau.identification.workbench.model import FittedModel, ModelSpec, parse_spec
 from servotau.identification.workbench.recordings import combine
 from servotau.identification.workbench.units import unit_of
 
@@ -47,6 +50,9 @@ def register(subparsers) -> None:
         _common(sp)
         if name == "compare":
             sp.add_argument("--model", metavar="TOML", help="evaluate this motor-parameter file (no refit)")
+            sp.add_argument("--any-target", action="store_true",
+                            help="with --model: score it even if it was fitted on another target or unit (e.g. a "
+                                 "friction-torque model on a servo-error log)")
         if name in ("diagnose", "add"):
             sp.add_argument("--effects", metavar="A,B", help="effects to rank (default: all registered)")
             sp.add_argument("--min-gain", type=float, default=MIN_GAIN, help="held-out gain that names an effect")
@@ -104,7 +110,8 @@ def _common(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--offset", choices=("auto", "on", "off"), default="auto",
                     help="a constant term in the base model (auto: on for a table whose target is not a servo "
                          "error, off for servo logs)")
-    sp.add_argument("--base", default="paper", help="base model: paper (k_tau, k_v), coulomb, or effects joined by +")
+    sp.add_argument("--base", default="paper", help="base model: paper (k_tau, k_v), coulomb, or effects joined by +; "
+                                                     "naming k_tau or k_v keeps only those named (k_v+coulomb)")
     sp.add_argument("--loss", default="least_squares", choices=("least_squares", "asymmetric"))
     sp.add_argument("--w", type=float, default=10.0, help="over-estimation weight of the asymmetric loss")
     sp.add_argument("--folds", type=int, default=DEFAULT_FOLDS, help="held-out blocks (or the log's segments)")
@@ -116,6 +123,21 @@ def _common(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--rerun", metavar="TARGET", help="save:FILE, connect:ADDR or spawn")
     sp.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def _base_spec(text: str, signals, offset: bool) -> ModelSpec:
+    """``--base``: :func:`parse_spec`, except that naming ``k_tau`` or ``k_v`` gives exactly the linear terms
+    named (``k_v+coulomb``: no ``k_tau`` even with a torque column)."""
+    names = [n.strip() for n in text.replace(",", "+").split("+") if n.strip()]
+    linear = [n for n in names if n in (K_TAU, K_V)]
+    spec = parse_spec([n for n in names if n not in linear], signals, offset=offset)
+    if not linear:
+        return spec
+    missing = [k for k in linear if k not in spec.linear]
+    if missing:
+        raise IdentificationError(f"--base {text}: {missing} named, but the log has no "
+                                  f"{'torque' if K_TAU in missing else 'velocity'}: expected a column of that role")
+    return ModelSpec(tuple(k for k in spec.linear if k in linear or k == OFFSET), spec.terms)
 
 
 def _roles(items: list[str]) -> dict[str, str]:
@@ -171,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
     unit = unit_of(ds, args.unit)
     say(f"error: {unit.quantity} [{unit.si}], shown in {unit.symbol}")
     offset = args.offset == "on" or (args.offset == "auto" and not ds.actuator)
-    spec = parse_spec(args.base, ds.signals, offset=offset)
+    spec = _base_spec(args.base, ds.signals, offset)
     folds = folds_of(ds, args.folds)
     effects = None
     if getattr(args, "effects", None):
@@ -180,7 +202,8 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise IdentificationError(f"--effects: unknown effect(s) {unknown}: expected names among {effect_names()}")
     out: dict = {"command": args.model_command, "data": {"source": ds.source, "joint": ds.joint, "n": ds.n,
-                                                         "dropped_rows": ds.n_dropped, "notes": list(ds.notes)},
+                                                         "dropped_rows": ds.n_dropped, "notes": list(ds.notes),
+                                                         "heldout_blocks": [f.label for f in folds]},
                  "unit": unit.to_dict()}
     comparison = diagnosis = ladder = None
     if args.model_command == "compare":
@@ -191,10 +214,17 @@ def run(args: argparse.Namespace) -> int:
             joint = ds.joint or (next(iter(params)) if len(params) == 1 else None)
             if joint is None:
                 raise IdentificationError(f"--model {args.model}: several joints {list(params)}: expected --joint")
-            given = FittedModel.from_motor_model(params[joint])
+            motor = params[joint]
+            if not args.any_target:
+                _same_target((motor.target, motor.unit), unit, f"--model {args.model} [{joint}]", ds.source)
+            given = FittedModel.from_motor_model(motor)
+            _has_signals(given, ds, f"--model {args.model} [{joint}]")
             comparison = compare(ds, given, loss)
             spec = given.spec
-            say(f"model {spec.label()} from {args.model}")
+            out["given"] = {"file": args.model, "joint": joint, "target": motor.target, "unit": motor.unit,
+                            "provenance": motor.provenance}
+            say(f"model {spec.label()} from {args.model} [{joint}], fitted on {motor.provenance.split(';')[0]}: "
+                "scored on this log without refitting (train = this log)")
         else:
             say(f"fitting {spec.label()} ({loss})")
             comparison = compare(ds, spec, loss, folds=folds)
@@ -225,8 +255,8 @@ def run(args: argparse.Namespace) -> int:
                 tau += f" ({OFFLINE_ESTIMATE})"
             path = save_model(ladder, args.save, joint,
                               provenance=f"{ds.source}; servotau model add; {loss}; tau: {tau}",
-                              dead_band_log=args.log[0] if dead_band else None)
-            out["saved"] = {"file": str(path), "joint": joint}
+                              dead_band_log=args.log[0] if dead_band else None, target=unit.quantity, unit=unit.si)
+            out["saved"] = {"file": str(path), "joint": joint, "target": unit.quantity, "unit": unit.si}
             say(f"saved {ladder.final.spec.label()} to {path} [{joint}]")
             if dead_band:
                 from servotau.actuator import MotorParameters
@@ -238,6 +268,7 @@ def run(args: argparse.Namespace) -> int:
         final = (ladder.rungs[-1].comparison.model if ladder is not None
                  else comparison.model if comparison is not None else diagnosis.base.model)
         test = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.test])
+        _has_signals(final, test, f"the model fitted on {ds.source}")
         tested = compare(test, final, loss)
         out["test"] = {"source": test.source, "n": test.n, "model": final.spec.label(),
                        **_clean(tested.train.to_dict())}
@@ -254,6 +285,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_human(out, ladder, unit)
     return 0
+
+
+def _same_target(fitted: tuple[str, str], unit, model: str, log: str) -> None:
+    """Refuse to score a model of one target (``(quantity, unit)``) on a log of another."""
+    if fitted != (unit.quantity, unit.si):
+        raise IdentificationError(
+            f"{model} predicts {fitted[0]} [{fitted[1]}], {log}'s target is {unit.quantity} [{unit.si}]: expected "
+            "a log of the same target and unit (--map target=..., --unit U; --any-target to score it anyway)")
+
+
+def _has_signals(model: FittedModel, ds, name: str) -> None:
+    """Refuse a model that reads the torque on a log without one (its other signals are checked when evaluated)."""
+    if "k_tau" in model.spec.linear and "tau" not in ds.signals:
+        raise IdentificationError(f"{name} has k_tau: expected a torque column in {ds.source} (--map torque=COLUMN)")
 
 
 def _jsonable(x):
