@@ -292,7 +292,7 @@ def _check_extra_terms(motors: Mapping[str, MotorModel], file: Path, period: flo
                 raise ConfigError(f"{file}: field '{field_}': unknown motor-model term '{name}': expected one of "
                                   f"the model workbench's effects {known}")
             try:
-                one = MotorModel(k_tau=m.k_tau, k_v=m.k_v, extra={name: term}, provenance=m.provenance)
+                one = replace(m, extra={name: term})
                 checked_online_model(one, period)
             except IdentificationError as err:
                 raise ConfigError(f"{file}: field '{field_}' (shape {dict(term.shape)}): joint \"{joint}\": {err}: "

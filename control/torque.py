@@ -70,6 +70,9 @@ class JointTorqueController:
             if j not in motors:
                 raise ControlError(f'joint "{j}" has no motor model: expected one of {sorted(motors)}')
             i, m = self.joint_names.index(j), motors[j]
+            issue = m.servo_issue()
+            if issue is not None:
+                raise ControlError(f'joint "{j}": motor model field \'{issue[0]}\' {issue[1]}')
             self.k_tau[i], self.k_v[i], self.k_c[i] = m.k_tau, m.k_v, m.k_c or 0.0
             self.k_p[i], self.k_i[i], self.integral_limit[i] = g.k_p, g.k_i, g.integral_limit
             if m.extra:

@@ -229,3 +229,11 @@ def test_missing_motor_model_or_unknown_joint_raise():
         JointTorqueController(JOINT_NAMES, MOTORS, {}, 0.0)
     with pytest.raises(ControlError, match="sign_velocity"):
         JointTorqueController(JOINT_NAMES, MOTORS, {}, 1e-3, -1.0)
+
+
+def test_a_model_without_k_tau_or_with_an_offset_is_refused_naming_the_joint_and_key():
+    """A model the workbench saved for another use (no torque term, a constant) is not a feedforward."""
+    for model, key in ((MotorModel(k_tau=None, k_v=0.01, provenance="test"), "k_tau"),
+                       (MotorModel(k_tau=1e-4, k_v=0.01, offset=1e-3, provenance="test"), "offset")):
+        with pytest.raises(ControlError, match=f'"RLEG_JOINT3".*{key}'):
+            JointTorqueController(JOINT_NAMES, {"RLEG_JOINT3": model}, {"RLEG_JOINT3": JointGains()}, 1e-3)
