@@ -5,7 +5,7 @@ from support.friction_state import dahl_euler
 from support.synthetic import synthetic_table
 
 from servotau.actuator import Signals, get_effect
-from servotau.actuator.effects._friction_state import affine_scan, x0_grid
+from servotau.actuator.friction_state import affine_scan, x0_grid
 from servotau.actuator.online import OnlineModel
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
 
@@ -27,7 +27,8 @@ def test_after_a_reversal_the_state_follows_one_minus_two_exp_of_the_travel():
     # the first forward tick travels half a tick's distance (mean velocity 0: the reversal sits mid-tick)
     travel = (np.arange(1, 101) - 1) * v * dt
     np.testing.assert_allclose(z[400:500], 1.0 - 2.0 * np.exp(-travel / x0), rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(z[501:], z[500], rtol=0, atol=1e-15)  # at rest: held (the first rest tick travels half a tick)
+    # at rest: held (the first rest tick travels half a tick)
+    np.testing.assert_allclose(z[501:], z[500], rtol=0, atol=1e-15)
     assert np.all(np.abs(z) <= 1.0)
 
 

@@ -4,7 +4,7 @@
 path ``dx = dq dt``: ``dz/dx = (1 - z sgn(dx)) / x0``, ``x0 = Fc / sigma`` [rad] the pre-sliding length (the
 travel over which the friction settles, ``sigma`` the bristles' stiffness). After a reversal at ``z = -1``,
 ``z = 1 - 2 exp(-|x - x_r| / x0)``; at rest ``z`` holds. Each tick is the exact step at the tick's mean velocity
-(:mod:`._friction_state`). On-line: ``dq`` and its history (the state ``z``, the last ``dq``).
+(:mod:`~servotau.actuator.friction_state`). On-line: ``dq`` and its history (the state ``z``, the last ``dq``).
 """
 
 from __future__ import annotations
@@ -14,17 +14,15 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..excitation import Excitation
+from ..friction_state import FRICTION_COEFFICIENT, OnlineState, state, x0_grid
 from ..registry import Effect
 from ..signals import Signals
-from ._friction_state import OnlineState, state, x0_grid
 
 ORDER = 35
-FRICTION_COEFFICIENT = (0.0, float("inf"))
-"""Friction opposes the motion: ``k_tau Fc >= 0`` (a negative coefficient would push the joint along)."""
 
 
 def grid(s: Signals) -> tuple[dict[str, float], ...]:
-    """Pre-sliding lengths the log resolves (:func:`~._friction_state.x0_grid`)."""
+    """Pre-sliding lengths the log resolves (:func:`~servotau.actuator.friction_state.x0_grid`)."""
     return tuple({"x0": x0} for x0 in x0_grid(s))
 
 
@@ -61,7 +59,7 @@ EFFECT = Effect(
     history=True,
     online_signals="dq (history: the friction state z and the last dq)",
     coefficient_range=FRICTION_COEFFICIENT,
-    confusable=("coulomb", "stiction", "elastic", "backlash", "lugre"),
+    confusable=("coulomb", "stiction", "elastic", "backlash", "motor_lag", "lugre"),
     experiments={
         "coulomb": "small back-and-forth moves (amplitudes from 0.1 x0 to 10 x0) at a low constant speed: Dahl "
         "friction grows with the travel since the reversal (1 - 2 exp(-travel / x0)), Coulomb friction steps at "
@@ -71,6 +69,9 @@ EFFECT = Effect(
         "once in the direction of the last move and is released",
         "elastic": "two slow triangular position sweeps of different amplitude: Dahl hysteresis saturates at the "
         "Coulomb level after a few x0 of travel, an elastic gear's deflection keeps following the torque",
+        "motor_lag": "back-and-forth moves of the same amplitude at two speeds (e.g. 0.02 and 0.2 rad/s): the Dahl "
+        "transition after a reversal takes the same travel x0 at both (its duration scales as 1 / speed), a lag "
+        "takes the same time",
         "backlash": "small moves at constant slow speed under a steady load: the Dahl state follows the travel "
         "whatever the load, the play of a backlash is crossed only where the torque changes sign",
     },

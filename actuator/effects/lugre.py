@@ -7,8 +7,8 @@ exp(-(dq/v_s)^2)``, ``fs_ratio = Fs / Fc`` and ``x0 = Fc / sigma0`` [rad] the pr
 (``|w| <= fs_ratio``), the coefficient ``k_tau Fc``. Simplifications: the viscous ``sigma2 v`` is the base model's
 ``k_v dq``; the bristle damping ``sigma1 dz/dt`` is left out (it acts during the pre-sliding transient, over a
 time ``sigma1 / sigma0`` far below a tick of a joint log, and its column is a derivative of ``w``: noise). Each
-tick is the exact step at the tick's mean velocity (:mod:`._friction_state`). On-line: ``dq`` and its history (the
-state ``w``, the last ``dq``).
+tick is the exact step at the tick's mean velocity (:mod:`~servotau.actuator.friction_state`). On-line: ``dq``
+and its history (the state ``w``, the last ``dq``).
 """
 
 from __future__ import annotations
@@ -19,10 +19,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..excitation import Excitation
+from ..friction_state import FRICTION_COEFFICIENT, OnlineState, state, x0_grid
 from ..registry import Effect
 from ..signals import Signals
-from ._friction_state import OnlineState, state, x0_grid
-from .dahl import FRICTION_COEFFICIENT
 
 ORDER = 36
 FS_RATIO = (1.5, 3.0)  # breakaway over Coulomb friction Fs / Fc
@@ -31,7 +30,8 @@ X0_SHAPES = 4  # pre-sliding lengths tried (those of dahl's grid, thinned)
 
 
 def grid(s: Signals) -> tuple[dict[str, float], ...]:
-    """Pre-sliding lengths the log resolves (:func:`~._friction_state.x0_grid`) x ``FS_RATIO`` x ``V_S``."""
+    """Pre-sliding lengths the log resolves (:func:`~servotau.actuator.friction_state.x0_grid`, thinned to
+    ``X0_SHAPES``) x ``FS_RATIO`` x ``V_S``."""
     return tuple({"x0": x0, "fs_ratio": r, "v_s": v}
                  for x0 in x0_grid(s, X0_SHAPES) for r in FS_RATIO for v in V_S)
 

@@ -14,9 +14,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..excitation import Excitation, both_directions
+from ..friction_state import FRICTION_COEFFICIENT
 from ..registry import Effect
 from ..signals import Signals
-from .dahl import FRICTION_COEFFICIENT
 
 ORDER = 32
 V_REF = 1.0  # [rad/s] the speed at which the coefficient is the friction

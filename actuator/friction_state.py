@@ -1,4 +1,4 @@
-"""The friction state shared by ``dahl`` and ``lugre`` (not an effect: the registry skips files starting with ``_``).
+"""The friction state shared by the effects ``dahl`` and ``lugre`` (and the friction coefficient range).
 
 Both integrate a normalised friction state ``z`` along the path travelled, ``dx = dq dt``, towards a steady
 state ``z_ss(dq)`` (``sgn(dq)`` for Dahl, ``g(dq) sgn(dq)`` for LuGre) over a pre-sliding length ``x0 g`` [rad],
@@ -21,8 +21,10 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from ..signals import Signals
+from .signals import Signals
 
+FRICTION_COEFFICIENT = (0.0, float("inf"))
+"""Friction opposes the motion: its coefficient ``k_tau F >= 0`` (a negative one would push the joint along)."""
 X0_RATIO = 2.5  # ratio between neighbouring pre-sliding lengths of the grids
 X0_MAX_SHAPES = 6  # most pre-sliding lengths a grid tries
 X0_DEFAULT = (1e-4, 3e-4, 1e-3, 3e-3)  # [rad] the grid without a sampling period (the regressor then refuses)
