@@ -20,8 +20,9 @@ from servotau.actuator import (
 from servotau.actuator import effects as effects_package
 from servotau.errors import IdentificationError
 
-LIBRARY_ORDER = ("coulomb", "coulomb_asym", "stribeck", "stiction", "deadzone", "direction_gain", "load_friction",
-                 "backlash", "cogging", "thermal_drift", "saturation", "elastic", "motor_lag", "delay")
+LIBRARY_ORDER = ("coulomb", "coulomb_asym", "stribeck", "viscous_power", "dahl", "lugre", "stiction", "deadzone",
+                 "direction_gain", "load_friction", "backlash", "cogging", "thermal_drift", "saturation", "elastic",
+                 "motor_lag", "delay")
 FILES = sorted(m.name for m in pkgutil.iter_modules(effects_package.__path__) if not m.name.startswith("_"))
 
 
@@ -89,7 +90,7 @@ def test_adding_an_effect_is_adding_a_file(tmp_path, monkeypatch):
 
 
 def test_experiments_name_both_effects_of_each_pair():
-    """The experiments of the library: ten look-alike pairs, each written once."""
-    assert len(EXPERIMENTS) == 10
+    """The experiments of the library: 20 look-alike pairs, each written once."""
+    assert len(EXPERIMENTS) == 20
     for pair, text in EXPERIMENTS.items():
         assert len(pair) == 2 and all(n in LIBRARY_ORDER for n in pair) and text

@@ -4,7 +4,8 @@ fitted to the current model's residual on the training blocks and scored on the 
 The families: bins of velocity; of torque by velocity sign; of ``u`` by velocity sign; of position; a
 polynomial drift in time; lagged differences of ``u`` and ``q_des`` (``dynamics``); and the residual's own past
 (``memory``). A probe's held-out gain is what a free function of its signals removes: the yardstick of the
-effects of its family.
+effects of its family. The memory probe finds a state no term models; :data:`MEMORY_CANDIDATES` are the states it
+names (pre-sliding friction hysteresis, a dead band crossed freely), with what their effects did.
 """
 
 from __future__ import annotations
@@ -28,6 +29,13 @@ MEMORY_LAGS = (1, 2, 4)
 neighbouring samples is forgotten after ``h`` (the velocity's longer SG window carries ``k_v`` times a
 differentiated encoder noise, orders smaller), so a residual still predictable ``h`` ahead has a state no term
 models. Three coefficients fitted on the training blocks, the residual's past read as on-line (causal)."""
+
+MEMORY_CANDIDATES = (
+    ("pre-sliding friction hysteresis", ("dahl", "lugre")),
+    ("a dead band crossed freely in a log without the command (the error depends on where the joint entered)",
+     ("deadzone",)),
+)
+"""States the memory probe points at when no term names them: what each is, and the effects that model it."""
 
 
 @dataclass(eq=False)
@@ -147,3 +155,24 @@ def _memory_gain(ds: Dataset, bases: list[FoldBase], loss: Loss, e0: float) -> f
     return 1.0 - error_of(y - pred, y, loss) / e0 if e0 > 0 else 0.0
 
 
+
+
+def memory_candidates(ranking, min_gain: float) -> list[str]:
+    """:data:`MEMORY_CANDIDATES` as text, each with what its effects did in ``ranking`` (candidates with
+    ``effect``, ``testable``, ``heldout_gain``, ``reason``): tried and how much they removed, untestable and why,
+    or not in the library tested."""
+    by_name = {c.effect: c for c in ranking}
+    out = []
+    for what, names in MEMORY_CANDIDATES:
+        tried = [by_name[n] for n in names if n in by_name]
+        if not tried:
+            out.append(f"{what} ({'/'.join(names)}: not in the library tested)")
+            continue
+        parts = []
+        for c in tried:
+            if c.testable:
+                parts.append(f"{c.effect} tried, removes {100 * c.heldout_gain:.0f} %")
+            else:
+                parts.append(f"{c.effect} untestable: {c.reason}")
+        out.append(f"{what} ({'; '.join(parts)}; {100 * min_gain:.0f} % names an effect)")
+    return out

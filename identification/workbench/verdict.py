@@ -17,7 +17,7 @@ from servotau.errors import IdentificationError
 from .data import Dataset
 from .evaluate import Comparison
 from .model import FittedModel, ModelSpec, design
-from .probes import MEMORY_HORIZON_S
+from .probes import MEMORY_HORIZON_S, memory_candidates
 
 PROBE_FACTOR = 2.0
 """A probe (tens of free parameters) names ``unexplained`` structure from ``PROBE_FACTOR * min_gain`` on."""
@@ -238,9 +238,8 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain) -> Diagnosis:
         elif memory >= PROBE_FACTOR * min_gain:
             verdict = "unexplained"
             message = no_effect + (f"but the residual's own past ({1e3 * MEMORY_HORIZON_S:.0f} ms and more earlier) "
-                                   f"predicts {100 * memory:.0f} % of it: a state no term models (e.g. a dead band "
-                                   "crossed freely in a log without the command: the error depends on where the "
-                                   "joint entered)")
+                                   f"predicts {100 * memory:.0f} % of it: a state no term models; candidates: "
+                                   + "; ".join(memory_candidates(ranking, min_gain)))
         elif tail >= TAIL_SHARE and where:
             verdict = "unexplained"
             message = (f"unexplained: {100 * tail:.0f} % of the squared held-out error sits in "
