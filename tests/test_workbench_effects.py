@@ -110,9 +110,6 @@ def test_pairs_are_found_by_the_greedy_ladder(pair):
     assert o["final_verdict"] != "missing_effect", o["final_message"]
 
 
-@pytest.mark.xfail(strict=True, reason="viscous_power (delta 2) is named first with 24 % of the held-out error, "
-                   "stribeck runner-up with 21 % (the separating experiment given): over this log's speeds the "
-                   "out-of-grid Stribeck curve bends like a power law")
 def test_out_of_grid_stribeck_on_the_simulator_is_partially_explained():
     """A Stribeck velocity outside the grid (0.6 rad/s, grid up to 0.32) is named at the largest v_s of the
     grid and reported as partially explained; the same excitation with v_s = 0.16 rad/s (in the grid) is not."""

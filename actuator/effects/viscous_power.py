@@ -2,8 +2,10 @@
 
 ``phi = sgn(dq) |dq / V_REF|^delta`` (``V_REF`` = 1 rad/s: the coefficient is the friction at 1 rad/s [rad]).
 The linear viscous part is the base model's ``k_v dq``, always fitted with it: the term holds only the curvature,
-and the grid leaves out ``delta = 1`` (and its neighbourhood 0.8 .. 1.5), where the column is ``k_v``'s. On-line:
-``dq``.
+and the grid leaves out ``delta = 1``, where the column is ``k_v``'s. The grid is sub-linear only (``delta < 1``):
+lubricated contacts grow slower than linearly with speed (full-film friction goes as about ``v^0.5``), while a
+convex term would stand in for a Stribeck drop beyond the Stribeck grid (it did on the simulator's out-of-grid
+Stribeck log). On-line: ``dq``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from ..signals import Signals
 
 ORDER = 32
 V_REF = 1.0  # [rad/s] the speed at which the coefficient is the friction
-DELTA = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 1.5, 2.0)  # exponents tried (1: the base model's k_v)
+DELTA = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8)  # exponents tried (1: the base model's k_v)
 GRID = tuple({"delta": d} for d in DELTA)
 
 
@@ -45,7 +47,7 @@ def needs(e: Excitation) -> str | None:
 EFFECT = Effect(
     "viscous_power", viscous_power, GRID, ("dq",),
     signature="residual against velocity bends like |dq|^delta (odd): concave for delta < 1 (steep at low speed, "
-    "flattening), convex for delta > 1, with no step at dq = 0",
+    "flattening), with no step at dq = 0",
     family="velocity",
     description="viscous friction growing as a power of the speed (lubricant film, seals)",
     needs=needs,
