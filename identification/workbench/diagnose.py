@@ -50,6 +50,7 @@ from dataclasses import replace
 import numpy as np
 
 from servotau.actuator import Effect, Loss, excitation_report, resolve_effects
+from servotau.actuator.excitation import units_plausible
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
@@ -190,7 +191,7 @@ def diagnose(
         if missing:
             ranking.append(_untestable(eff, f"needs signal(s) {missing}: not in the log"))
             continue
-        reason = eff.needs(exc) if eff.needs is not None else None
+        reason = units_plausible(exc) or (eff.needs(exc) if eff.needs is not None else None)
         pred, failures = _score_effect(ds, eff, bases, loss, cache)
         if np.isnan(pred).any():
             ranking.append(_untestable(eff, f"no shape could be fitted: {failures[0] if failures else '?'}"))
