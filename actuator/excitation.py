@@ -135,8 +135,8 @@ class Excitation:
                 f"loaded motion (|tau| > 30 % of its peak while moving): {100 * self.loaded_motion:.0f} %",
             ]
         if self.position_range is not None:
-            out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad, largest stretch "
-                       f"sampled fewer than 3 times {self.position_gap:.3g} rad")
+            out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad, largest "
+                       f"stretch sampled fewer than 3 times {self.position_gap:.3g} rad")
         if self.period_jitter > 0.0:
             out.append(f"time steps jitter by {100 * self.period_jitter:.0f} % of the period (robust spread)")
         out += [f"units doubted: {d}" for d in self.unit_doubts]

@@ -58,7 +58,7 @@ from .data import Dataset, faster_derivative
 from .evaluate import compare, error_of
 from .model import FittedModel, ModelSpec, Term, fit_spec, resolve_shapes, solve
 from .probes import FoldBase, base_per_fold, probe_gains
-from .verdict import Candidate, Confusion, Diagnosis, verdict_of
+from .verdict import Candidate, Confusion, Diagnosis, recheck_probes, verdict_of
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
 
@@ -254,7 +254,8 @@ def diagnose(
             ranking[0] = replace(top, remaining=rem, partial=partial)
         except IdentificationError:
             pass
-    return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain)
+    probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
+    return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
 
 
 def _gain_with(ds: Dataset, spec: ModelSpec, eff: Effect, loss: Loss, folds: list[Fold]) -> float:
