@@ -63,6 +63,7 @@ FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 o
 MAX_WINDOW = 101  # [samples] longest SG window considered by cv_window
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
+PERIOD_JUMPS = 0.05  # fraction of long time steps beyond which the period jumps (the log is resampled)
 RUN_GAP = 1.5  # [periods] a longer time step ends a run of samples (filters do not cross it)
 _SIGNAL_OF_ROLE = {"position": "q", "command": "q_des", "torque": "tau", "velocity": "dq", "acceleration": "ddq",
                    "time": "t"}
@@ -159,7 +160,11 @@ def load_dataset(
         raise IdentificationError(f"{name}: no numeric column: expected a table of samples")
     roles, joint = resolve_roles(columns, joint, roles)
     notes = [estimated] if estimated else []
-    roles = _drop_constant(columns, dict(roles), notes)
+    kept = _drop_constant(columns, dict(roles), notes)
+    dropped = {col for role, col in roles.items() if role not in kept}
+    roles = kept
+    if "time" in roles:
+        columns = _uniform(columns, roles, notes)
     used = {role: columns[col] for role, col in roles.items()}
     n_total = len(next(iter(columns.values())))
     valid = np.ones(n_total, dtype=bool)
@@ -246,7 +251,7 @@ def load_dataset(
     else:
         target = used["command"][valid] - used["position"][valid]
     for col, arr in columns.items():
-        if col not in sig:
+        if col not in sig and col not in dropped:
             sig[col] = arr[valid]
     n = int(valid.sum())
     segment = used["segment"][valid] if "segment" in roles else None
@@ -312,6 +317,41 @@ def _drop_constant(columns: Mapping[str, np.ndarray], roles: dict[str, str], not
             if dropped:
                 del roles[role]
     return roles
+
+
+def _uniform(columns: Mapping[str, np.ndarray], roles: Mapping[str, str], notes: list[str]) -> dict[str, np.ndarray]:
+    """``columns`` resampled onto a uniform grid when the sample period jumps (more than ``PERIOD_JUMPS`` of the
+    steps are longer than ``RUN_GAP`` median periods, the others within ``JITTER_TOL``: another period, not a few
+    gaps nor jitter): the grid's period is the
+    90th percentile of the steps (no sample is invented between coarse ones), values linear between the
+    neighbouring samples (the segment label: the nearest sample's), grid points farther than a period from every
+    sample dropped (the gaps stay gaps). Otherwise ``columns`` unchanged."""
+    t = columns[roles["time"]]
+    ok = np.isfinite(t)
+    steps = np.diff(t[ok])
+    if steps.size < 2 or np.any(steps <= 0):
+        return dict(columns)  # load_dataset names the fault
+    dt = float(np.median(steps))
+    long = float(np.mean(steps > RUN_GAP * dt))
+    if long <= PERIOD_JUMPS or period_jitter(t[ok], dt)[0] > JITTER_TOL:
+        return dict(columns)  # a few gaps, or jitter (noted by load_dataset), not another period
+    period = float(np.quantile(steps, 0.9))
+    grid = np.arange(t[ok][0], t[ok][-1] + 0.5 * period, period)
+    src = t[ok]
+    k = np.clip(np.searchsorted(src, grid), 1, len(src) - 1)
+    near = np.where(grid - src[k - 1] <= src[k] - grid, k - 1, k)
+    keep = np.abs(src[near] - grid) <= period
+    grid, near = grid[keep], near[keep]
+    out = {}
+    for col, x in columns.items():
+        x = np.asarray(x, dtype=np.float64)[ok]
+        out[col] = x[near] if col == roles.get("segment") else np.interp(grid, src, x)
+    out[roles["time"]] = grid
+    notes.append(f"time: the sample period jumps ({100 * long:.0f} % of the steps are longer than {RUN_GAP} x the "
+                 f"median {1e3 * dt:.3g} ms): resampled onto a uniform {1e3 * period:.3g} ms grid (linear "
+                 f"interpolation, {len(src)} -> {len(grid)} rows)")
+    log.warning("%s", notes[-1])
+    return out
 
 
 def _jitter_note(t: np.ndarray, dt: float) -> str | None:
