@@ -73,6 +73,7 @@ class Excitation:
         position_gap: Largest stretch [rad] of the positions sampled where a function of the position is known
             only from one or two samples (:func:`position_gap`; None without position).
         unit_doubts: Values implausible in the role's unit (:func:`unit_doubts`).
+        faults: What makes the log unfit to test any effect (a position that never changes).
         velocity_noise: Noise floor of ``dq`` [rad/s] (:func:`noise_floor`).
         v_peak: Peak speed [rad/s] (``PEAK_QUANTILE`` of ``|dq|``).
         v_hold, v_move, v_fast: Thresholds of holding still, moving and fast motion [rad/s], from the two above.
@@ -104,6 +105,7 @@ class Excitation:
     period_jitter: float = 0.0
     position_gap: float | None = None
     unit_doubts: tuple[str, ...] = ()
+    faults: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -139,7 +141,7 @@ class Excitation:
                        f"stretch sampled fewer than 3 times {self.position_gap:.3g} rad")
         if self.period_jitter > 0.0:
             out.append(f"time steps jitter by {100 * self.period_jitter:.0f} % of the period (robust spread)")
-        out += [f"units doubted: {d}" for d in self.unit_doubts]
+        out += [f"units doubted: {d}" for d in self.unit_doubts] + [f"fault: {f}" for f in self.faults]
         return out
 
 
@@ -277,6 +279,8 @@ def excitation_report(signals: Signals) -> Excitation:
         period_jitter=jitter,
         position_gap=gap,
         unit_doubts=tuple(doubts),
+        faults=(f"the position never changes (= {q[0]:.6g} rad): the joint never moved",)
+        if q is not None and q.size and np.ptp(q) == 0.0 else (),
     )
 
 
@@ -338,7 +342,10 @@ def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
 
 # -- requirements shared by several effects: a reason string when the data cannot test the effect ------
 def units_plausible(e: Excitation) -> str | None:
-    """Values plausible in the units the roles expect (every effect's shapes are in rad, rad/s and N m)."""
+    """A joint that moved, and values plausible in the units the roles expect (every effect's shapes are in rad,
+    rad/s and N m)."""
+    if e.faults:
+        return "cannot tell: " + "; ".join(e.faults)
     if e.unit_doubts:
         return "cannot tell: units doubted: " + "; ".join(e.unit_doubts)
     return None

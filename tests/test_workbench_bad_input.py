@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.synthetic import K_TAU, synthetic_table
 
 from servotau.actuator import excitation_report, get_effect
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
 from servotau.identification.workbench.data import describe
 from servotau.identification.workbench.verdict import VERDICTS
-from support.synthetic import K_TAU, synthetic_table
 
 FRICTION = ["coulomb", "stribeck", "delay", "motor_lag"]  # a few effects keep the tests fast
 
@@ -149,3 +149,15 @@ def test_torque_in_millinewton_metres_cannot_tell():
 def test_plausible_log_has_no_unit_note():
     ds = load_dataset(_big_motion())
     assert _note(ds, "units:") is None and not excitation_report(ds.signals).unit_doubts
+
+
+def test_constant_position_cannot_tell():
+    cols = _table(4.0)
+    cols.pop("dq")
+    cols["q"] = np.full_like(cols["q"], 0.3)
+    ds = load_dataset(cols)
+    assert "effects that read it cannot be told" in _note(ds, "'q' (role position)")
+    d = _diagnose(ds, ["coulomb", "delay"])
+    assert d.verdict != "missing_effect"
+    assert d.message.startswith("cannot tell which effect: the position never changes")
+    assert all(not c.testable for c in d.ranking)

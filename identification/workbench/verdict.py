@@ -303,6 +303,8 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
         message += "; " + "; ".join(checks)
     if exc.unit_doubts:
         message = "cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts) + "); " + message
+    if exc.faults:
+        message = "cannot tell which effect: " + "; ".join(exc.faults) + "; " + message
     return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0],
                      checks)
 
