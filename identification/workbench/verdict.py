@@ -1,6 +1,11 @@
 """The diagnosis's result (:class:`Diagnosis`, its :class:`Candidate` effects and :class:`Confusion`) and its
 verdict (see :mod:`.diagnose`): ``missing_effect``, ``unexplained`` or ``no_missing_effect``, with the message
 that says why, the experiments that separate look-alike effects, and the residual's tail.
+
+The probes that the workbench's own differentiation can feed (``CHECKED_PROBES``) call a log ``unexplained`` only
+if they survive a faster derivative (:func:`recheck_probes`). A log whose units are doubted or whose joint never
+moves (:class:`~servotau.actuator.Excitation`'s ``unit_doubts`` and ``faults``) gets a message that starts
+"cannot tell which effect" (every effect is then untestable).
 """
 
 from __future__ import annotations
@@ -213,13 +218,16 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
         return out, ()
     fds, w = fast
     cache: dict = {}
-    bases = base_per_fold(fds, spec, loss, folds, cache)
-    pred = np.full(fds.n, np.nan)
-    for b in bases:
-        pred[b.fold.test] = b.pred[b.fold.test]
-    e0 = error_of(fds.target - pred, fds.target, loss)
-    model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
-    again = probe_gains(fds, bases, model, loss, e0)
+    try:
+        bases = base_per_fold(fds, spec, loss, folds, cache)
+        pred = np.full(fds.n, np.nan)
+        for b in bases:
+            pred[b.fold.test] = b.pred[b.fold.test]
+        e0 = error_of(fds.target - pred, fds.target, loss)
+        model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
+        again = probe_gains(fds, bases, model, loss, e0)
+    except IdentificationError as exc:
+        return out, (f"the check of the {', '.join(todo)} probe with a faster derivative failed: {exc}",)
     notes = []
     w0 = ds.preprocessing["dq"]["window"]
     for k in todo:
