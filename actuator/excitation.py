@@ -1,41 +1,84 @@
 """Excitation report: what the data exercised, so that an effect the data never excited is reported as
 untestable, not as absent; and the requirements several effects share (each effect's ``needs`` in its file).
+
+Every threshold is scaled to the log itself, not to one robot: the velocity's noise floor (the robust spread of
+its second difference, :func:`noise_floor`) and its peak (``PEAK_QUANTILE`` of ``|dq|``) set what counts as
+holding still, moving and fast motion; the torque's noise floor and peak set the hysteresis of its sign changes;
+the sample period sets which lag-like shapes the log resolves (:func:`resolvable`, :class:`ResolvedGrid`). A
+requirement's reason names the value measured on the log and the one needed.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from .signals import Signals
 
-V_HOLD = 0.01  # [rad/s] below: holding still
-V_MOVE = 0.05  # [rad/s] above: moving
-V_SLOW = 0.25  # [rad/s] moving below this is slow motion
-V_FAST = 0.3  # [rad/s] above: fast motion
+NOISE_MULTIPLE = 3.0
+"""Holding still: ``|dq|`` below ``NOISE_MULTIPLE`` velocity noise floors (or ``HOLD_FRACTION`` of the peak)."""
+HOLD_FRACTION = 0.01
+MOVE_FRACTION = 0.05
+"""Moving: ``|dq|`` above twice the hold threshold and ``MOVE_FRACTION`` of the peak speed."""
+FAST_FRACTION = 0.5
+"""Fast motion: ``|dq|`` above ``FAST_FRACTION`` of the peak speed (and twice the move threshold); slow motion:
+between the hold threshold and that."""
+PEAK_QUANTILE = 0.99
+"""The peak of ``|dq|`` and ``|tau|``: this quantile (a few spikes do not set the scale)."""
+TORQUE_HYSTERESIS = 0.05
+"""A torque sign change counts beyond ``TORQUE_HYSTERESIS`` of the torque peak and ``NOISE_MULTIPLE`` noise floors."""
+MIN_SPAN = 50
+"""[samples] Fewest samples of slow, fast or held motion an effect that needs it accepts."""
+RESOLVE_PERIODS = 2.0
+"""A lag-like shape (a delay, a time constant, the inertia term's lag) shorter than this many sample periods is
+not resolved by the log: it is not offered, and an effect left without shapes cannot be told."""
+JITTER_TOL = 0.25
+"""Robust spread of the time steps [periods] up to which a log counts as uniformly sampled; beyond it the timing
+cannot resolve a lag-like effect."""
+GAP = 1.5
+"""[periods] A longer time step is a gap (the filters restart), not jitter."""
+TURNS = 2.0
+"""A position column spanning more turns than this, or a servo error beyond ``MAX_ERROR``, is doubted to be in rad."""
+MAX_ERROR = 1.0  # [rad]
+MAX_TORQUE = 1e3  # [N m] a torque beyond this is doubted to be in N m (mN m?)
+SG_MIN = 5
+"""[samples] Shortest Savitzky-Golay window of the acceleration (order 3): a shape's window shorter than
+``SG_MIN - 0.5`` periods would be clamped to it, so it is not offered."""
 
 
 @dataclass(frozen=True)
 class Excitation:
-    """What a log exercised (thresholds ``V_HOLD``, ``V_MOVE``, ``V_SLOW``, ``V_FAST`` in rad/s).
+    """What a log exercised, with the thresholds measured on it.
 
     Attributes:
         duration: Length of the log [s] (sample count times period if the time is known).
         n_samples: Number of samples.
-        velocity_reversals: Changes of direction between moves faster than ``V_MOVE``.
-        hold_time: Time with ``|dq| < V_HOLD`` [s].
-        slow_time: Time with ``V_HOLD <= |dq| < V_SLOW`` [s].
-        fast_time: Time with ``|dq| > V_FAST`` [s].
+        velocity_reversals: Changes of direction between moves faster than ``v_move``.
+        hold_time: Time with ``|dq| < v_hold`` [s].
+        slow_time: Time with ``v_hold <= |dq| < v_fast`` [s].
+        fast_time: Time with ``|dq| > v_fast`` [s].
         quadrants: Fraction of the moving samples in each (velocity sign, torque sign) quadrant,
             keys ``"+,+"``, ``"+,-"``, ``"-,+"``, ``"-,-"`` (empty without torque).
         torque_range: Smallest and largest torque [N m] (None without torque).
         torque_reversals_at_rest: Sign changes of the torque while holding still: the command still if
-            the log has one, else ``|dq| < V_HOLD`` (hysteresis 5 % of the largest ``|tau|``).
+            the log has one, else ``|dq| < v_hold`` (hysteresis ``tau_threshold``).
         torque_reversals: Sign changes of the torque anywhere (same hysteresis).
-        loaded_motion: Fraction of the moving samples with ``|tau|`` above 30 % of its largest value.
+        loaded_motion: Fraction of the moving samples with ``|tau|`` above 30 % of its peak.
         velocity_range: Smallest and largest velocity [rad/s].
         position_range: Smallest and largest position [rad] (None without position).
+        period: Sample period [s] (None without time).
+        period_jitter: Robust spread of the time steps [periods] (:func:`period_jitter`).
+        position_gap: Largest stretch [rad] of the positions sampled where a function of the position is known
+            only from one or two samples (:func:`position_gap`; None without position).
+        unit_doubts: Values implausible in the role's unit (:func:`unit_doubts`).
+        faults: What makes the log unfit to test any effect (a position that never changes).
+        velocity_noise: Noise floor of ``dq`` [rad/s] (:func:`noise_floor`).
+        v_peak: Peak speed [rad/s] (``PEAK_QUANTILE`` of ``|dq|``).
+        v_hold, v_move, v_fast: Thresholds of holding still, moving and fast motion [rad/s], from the two above.
+        torque_noise: Noise floor of the torque [N m] (of the raw column when the log's torque was smoothed).
+        tau_threshold: Hysteresis of the torque's sign changes [N m].
     """
 
     duration: float
@@ -51,29 +94,110 @@ class Excitation:
     loaded_motion: float
     velocity_range: tuple[float, float]
     position_range: tuple[float, float] | None
+    period: float | None = None
+    velocity_noise: float = 0.0
+    v_peak: float = 0.0
+    v_hold: float = 0.0
+    v_move: float = 0.0
+    v_fast: float = 0.0
+    torque_noise: float | None = None
+    tau_threshold: float | None = None
+    period_jitter: float = 0.0
+    position_gap: float | None = None
+    unit_doubts: tuple[str, ...] = ()
+    faults: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @property
+    def min_span(self) -> float:
+        """[s] Shortest slow, fast or held motion an effect that needs it accepts (``MIN_SPAN`` samples)."""
+        return MIN_SPAN * (self.period or self.duration / max(self.n_samples, 1))
+
     def lines(self) -> list[str]:
         """Human-readable summary, one fact per line."""
         out = [
-            f"duration {self.duration:.1f} s, {self.n_samples} samples",
-            f"velocity reversals: {self.velocity_reversals} (moves faster than {V_MOVE} rad/s)",
+            f"duration {self.duration:.1f} s, {self.n_samples} samples"
+            + (f", period {1e3 * self.period:.3g} ms" if self.period else ""),
+            f"velocity: peak {self.v_peak:.3g} rad/s ({100 * PEAK_QUANTILE:.0f} % of |dq|), noise floor "
+            f"{self.velocity_noise:.2g} rad/s; thresholds hold < {self.v_hold:.2g}, moving > {self.v_move:.2g}, "
+            f"fast > {self.v_fast:.2g} rad/s",
+            f"velocity reversals: {self.velocity_reversals} (moves faster than {self.v_move:.2g} rad/s)",
             f"hold {self.hold_time:.1f} s, slow motion {self.slow_time:.1f} s, fast motion {self.fast_time:.1f} s",
             f"velocity range [{self.velocity_range[0]:.3g}, {self.velocity_range[1]:.3g}] rad/s",
         ]
         if self.torque_range is not None:
             quad = ", ".join(f"{k}: {100 * v:.0f} %" for k, v in self.quadrants.items())
             out += [
-                f"torque range [{self.torque_range[0]:.3g}, {self.torque_range[1]:.3g}] N m, "
-                f"{self.torque_reversals} sign changes, {self.torque_reversals_at_rest} at rest",
+                f"torque range [{self.torque_range[0]:.3g}, {self.torque_range[1]:.3g}] N m, noise floor "
+                f"{self.torque_noise:.2g} N m; {self.torque_reversals} sign changes beyond "
+                f"+-{self.tau_threshold:.2g} N m, {self.torque_reversals_at_rest} at rest",
                 f"quadrants (velocity sign, torque sign) of moving samples: {quad}",
-                f"loaded motion (|tau| > 30 % of max while moving): {100 * self.loaded_motion:.0f} %",
+                f"loaded motion (|tau| > 30 % of its peak while moving): {100 * self.loaded_motion:.0f} %",
             ]
         if self.position_range is not None:
-            out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad")
+            out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad, largest "
+                       f"stretch sampled fewer than 3 times {self.position_gap:.3g} rad")
+        if self.period_jitter > 0.0:
+            out.append(f"time steps jitter by {100 * self.period_jitter:.0f} % of the period (robust spread)")
+        out += [f"units doubted: {d}" for d in self.unit_doubts] + [f"fault: {f}" for f in self.faults]
         return out
+
+
+def noise_floor(x: np.ndarray) -> float:
+    """White-noise standard deviation of ``x`` from its high-frequency part: the robust spread (1.4826 times the
+    median absolute value) of the second difference over ``sqrt(6)``; a smooth motion hardly contributes. 0 for
+    fewer than 3 samples or a quantised signal that mostly holds still."""
+    x = np.asarray(x, dtype=np.float64)
+    if x.size < 3:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(np.diff(x, 2))) / np.sqrt(6.0))
+
+
+def period_jitter(t: np.ndarray, period: float) -> tuple[float, float]:
+    """``(spread, largest)``: the robust spread (1.4826 times the median) and the largest of ``|step / period - 1|``
+    over the time steps of ``t`` [s] that are not gaps (at most ``GAP`` periods)."""
+    steps = np.diff(np.asarray(t, dtype=np.float64))
+    dev = np.abs(steps[steps <= GAP * period] / period - 1.0)
+    if dev.size == 0:
+        return 0.0, 0.0
+    return 1.4826 * float(np.median(dev)), float(dev.max())
+
+
+def unit_doubts(q: np.ndarray | None, error: np.ndarray | None, tau: np.ndarray | None) -> list[str]:
+    """Values implausible in the unit their role expects: a position ``q`` [rad] over ``TURNS`` turns, a servo
+    error ``q_des - q`` [rad] beyond ``MAX_ERROR``, a torque beyond ``MAX_TORQUE`` [N m] (each its 99th percentile
+    or range); each doubt names the value measured and the bound."""
+    out = []
+    if q is not None and q.size and np.ptp(q) > TURNS * 2 * np.pi:
+        out.append(f"the position spans {np.ptp(q):.4g} rad ({np.ptp(q) / (2 * np.pi):.3g} turns, more than "
+                   f"{TURNS:g}): expected [rad]; degrees? (convert the column)")
+    if error is not None and error.size:
+        e = float(np.quantile(np.abs(error), PEAK_QUANTILE))
+        if e > MAX_ERROR:
+            out.append(f"the servo error q_des - q reaches {e:.4g} rad ({100 * PEAK_QUANTILE:.0f} % of |error|, "
+                       f"more than {MAX_ERROR:g} rad): expected [rad]; degrees? (convert the columns)")
+    if tau is not None and tau.size:
+        m = float(np.quantile(np.abs(tau), PEAK_QUANTILE))
+        if m > MAX_TORQUE:
+            out.append(f"the torque reaches {m:.4g} ({100 * PEAK_QUANTILE:.0f} % of |tau|, more than {MAX_TORQUE:g} "
+                       "N m): expected [N m]; mN m? (convert the column)")
+    return out
+
+
+def position_gap(q: np.ndarray, bins: int = 100, visits: int = 3) -> float:
+    """Largest stretch [rad] of the position range (its 1 % to 99 % quantiles, cut into ``bins``) without a bin
+    visited by ``visits`` samples: where a function of the position is known only from a sample or two."""
+    lo, hi = np.quantile(q, (0.01, 0.99))
+    if hi <= lo:
+        return 0.0
+    counts, _ = np.histogram(q, bins=bins, range=(lo, hi))
+    run = longest = 0
+    for c in counts:
+        run = run + 1 if c < visits else 0
+        longest = max(longest, run)
+    return float((longest + 1) * (hi - lo) / bins) if longest else 0.0
 
 
 def _reversals(x: np.ndarray, threshold: float) -> int:
@@ -83,42 +207,60 @@ def _reversals(x: np.ndarray, threshold: float) -> int:
     return int(np.count_nonzero(np.diff(s))) if s.size else 0
 
 
+def speed_thresholds(dq: np.ndarray) -> tuple[float, float, float, float, float]:
+    """``(noise floor, peak, v_hold, v_move, v_fast)`` [rad/s] of one log's velocity (see the module doc)."""
+    noise = noise_floor(dq)
+    peak = float(np.quantile(np.abs(dq), PEAK_QUANTILE)) if len(dq) else 0.0
+    v_hold = max(NOISE_MULTIPLE * noise, HOLD_FRACTION * peak)
+    v_move = max(2.0 * v_hold, MOVE_FRACTION * peak)
+    v_fast = max(2.0 * v_move, FAST_FRACTION * peak)
+    return noise, peak, v_hold, v_move, v_fast
+
+
 def excitation_report(signals: Signals) -> Excitation:
-    """What ``signals`` exercised (``dq`` required, ``tau`` / ``q`` / ``t`` used when present)."""
-    dq = signals["dq"]
+    """What ``signals`` exercised (``dq`` required, ``tau`` / ``tau_raw`` / ``q`` / ``q_des`` / ``t`` used when
+    present; ``tau_raw`` is the unsmoothed torque whose noise floor sets the torque's hysteresis)."""
+    dq = np.asarray(signals["dq"], dtype=np.float64)
     n = len(dq)
-    dt = signals.dt or 0.0
-    duration = n * dt
+    period = signals.dt
+    dt = period or 0.0
     speed = np.abs(dq)
-    hold = speed < V_HOLD
-    moving = speed > V_MOVE
+    noise_v, peak_v, v_hold, v_move, v_fast = speed_thresholds(dq)
+    hold = speed < v_hold
+    moving = speed > v_move
     tau = signals["tau"] if "tau" in signals else None
     quadrants: dict[str, float] = {}
-    torque_range = None
+    torque_range = torque_noise = tau_threshold = None
     rest_rev = rev = 0
     loaded = 0.0
     if tau is not None:
         torque_range = (float(tau.min()), float(tau.max()))
-        peak = float(np.max(np.abs(tau))) or 1.0
+        torque_noise = noise_floor(signals["tau_raw"] if "tau_raw" in signals else tau)
+        peak = float(np.quantile(np.abs(tau), PEAK_QUANTILE)) or float(np.max(np.abs(tau))) or 1.0
+        tau_threshold = max(TORQUE_HYSTERESIS * peak, NOISE_MULTIPLE * torque_noise)
         m = max(int(moving.sum()), 1)
         for sv, sn in ((1, "+"), (-1, "-")):
             for st, tn in ((1, "+"), (-1, "-")):
                 sel = moving & (np.sign(dq) == sv) & (np.sign(tau) == st)
                 quadrants[f"{sn},{tn}"] = float(np.count_nonzero(sel) / m)
-        rev = _reversals(tau, 0.05 * peak)
+        rev = _reversals(tau, tau_threshold)
         still = hold
         if "q_des" in signals:  # a hold is where the command holds still (the joint may creep in a dead band)
             still = np.abs(np.gradient(signals["q_des"])) < 1e-12
-        rest_rev = _count_rest_reversals(tau, still, 0.05 * peak)
+        rest_rev = _count_rest_reversals(tau, still, tau_threshold)
         loaded = float(np.count_nonzero(moving & (np.abs(tau) > 0.3 * peak)) / m)
     q = signals["q"] if "q" in signals else None
+    gap = None if q is None or q.size < 3 else position_gap(q)
+    jitter = period_jitter(signals["t"], period)[0] if period and "t" in signals else 0.0
+    error = signals["q_des"] - q if q is not None and "q_des" in signals else None
+    doubts = unit_doubts(q, error, signals["tau_raw"] if "tau_raw" in signals else tau)
     return Excitation(
-        duration=float(duration),
+        duration=float(n * dt),
         n_samples=n,
-        velocity_reversals=_reversals(dq, V_MOVE),
+        velocity_reversals=_reversals(dq, v_move),
         hold_time=float(hold.sum() * dt),
-        slow_time=float(np.count_nonzero(~hold & (speed < V_SLOW)) * dt),
-        fast_time=float(np.count_nonzero(speed > V_FAST) * dt),
+        slow_time=float(np.count_nonzero(~hold & (speed < v_fast)) * dt),
+        fast_time=float(np.count_nonzero(speed > v_fast) * dt),
         quadrants=quadrants,
         torque_range=torque_range,
         torque_reversals_at_rest=rest_rev,
@@ -126,6 +268,19 @@ def excitation_report(signals: Signals) -> Excitation:
         loaded_motion=loaded,
         velocity_range=(float(dq.min()), float(dq.max())),
         position_range=None if q is None else (float(q.min()), float(q.max())),
+        period=period,
+        velocity_noise=noise_v,
+        v_peak=peak_v,
+        v_hold=v_hold,
+        v_move=v_move,
+        v_fast=v_fast,
+        torque_noise=torque_noise,
+        tau_threshold=tau_threshold,
+        period_jitter=jitter,
+        position_gap=gap,
+        unit_doubts=tuple(doubts),
+        faults=(f"the position never changes (= {q[0]:.6g} rad): the joint never moved",)
+        if q is not None and q.size and np.ptp(q) == 0.0 else (),
     )
 
 
@@ -138,11 +293,71 @@ def _count_rest_reversals(tau: np.ndarray, hold: np.ndarray, threshold: float) -
     return count
 
 
+# -- what the sample period resolves -------------------------------------------------------------------
+def shortest(key: str, period: float | None) -> float:
+    """[s] Shortest value of the time parameter ``key`` of a shape that a log sampled every ``period`` resolves:
+    ``SG_MIN - 0.5`` periods for an acceleration ``window``, ``RESOLVE_PERIODS`` periods otherwise (0 without
+    a period)."""
+    if not period:
+        return 0.0
+    return (SG_MIN - 0.5) * period if key == "window" else RESOLVE_PERIODS * period
+
+
+def resolvable(shape: Mapping[str, float], keys: Iterable[str], period: float | None) -> bool:
+    """Every time parameter of ``shape`` named in ``keys`` is 0 (none) or resolved at ``period`` [s]."""
+    return all(shape[k] == 0.0 or shape[k] >= shortest(k, period) for k in keys if k in shape)
+
+
+@dataclass(frozen=True)
+class ResolvedGrid:
+    """An effect's grid restricted to the shapes the log's sample period resolves (:func:`resolvable`): called
+    with the signals, the shapes whose time parameters ``keys`` [s] are at least :func:`shortest`; when none is,
+    the whole grid (the effect's ``needs`` then says it cannot be told, see :func:`lag_resolved`)."""
+
+    shapes: tuple[Mapping[str, float], ...]
+    keys: tuple[str, ...]
+
+    def __call__(self, signals: Signals) -> tuple[Mapping[str, float], ...]:
+        kept = tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
+        return kept or self.shapes
+
+
+def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
+    """Why the log's timing resolves no shape of ``grid`` (``what``: e.g. "delay"), or None: time steps that
+    jitter by more than ``JITTER_TOL``, or a sample period longer than every shape allows."""
+    if e.period_jitter > JITTER_TOL:
+        return (f"cannot tell: the time steps jitter by {100 * e.period_jitter:.0f} % of the period (more than "
+                f"{100 * JITTER_TOL:.0f} %): the timing cannot resolve a {what}")
+    if any(resolvable(g, grid.keys, e.period) for g in grid.shapes):
+        return None
+    ranges = []
+    for k in grid.keys:
+        values = sorted({g[k] for g in grid.shapes if g.get(k, 0.0) > 0.0})
+        if values:
+            ranges.append(f"{k} {1e3 * values[0]:.3g}-{1e3 * values[-1]:.3g} ms (needs >= "
+                          f"{1e3 * shortest(k, e.period):.3g} ms)")
+    return (f"cannot tell: the sample period {1e3 * (e.period or 0.0):.3g} ms resolves no {what} of the grid: "
+            + "; ".join(ranges))
+
+
 # -- requirements shared by several effects: a reason string when the data cannot test the effect ------
+def units_plausible(e: Excitation) -> str | None:
+    """A joint that moved, and values plausible in the units the roles expect (every effect's shapes are in rad,
+    rad/s and N m)."""
+    if e.faults:
+        return "cannot tell: " + "; ".join(e.faults)
+    if e.unit_doubts:
+        return "cannot tell: units doubted: " + "; ".join(e.unit_doubts)
+    return None
+
+
 def both_directions(e: Excitation) -> str | None:
-    """Motion in both directions (at least two velocity reversals)."""
+    """Motion in both directions (at least two velocity reversals beyond the log's move threshold)."""
     if e.velocity_reversals < 2:
-        return f"only {e.velocity_reversals} velocity reversals: expected motion in both directions (>= 2)"
+        lo, hi = e.velocity_range
+        where = " (the velocity never crosses zero)" if lo > 0.0 or hi < 0.0 else ""
+        return (f"only {e.velocity_reversals} velocity reversals beyond +-{e.v_move:.2g} rad/s "
+                f"(velocity range [{lo:.3g}, {hi:.3g}] rad/s{where}): expected motion in both directions (>= 2)")
     return None
 
 
@@ -152,7 +367,26 @@ def has_torque(e: Excitation) -> str | None:
 
 
 def fast_motion(e: Excitation) -> str | None:
-    """At least 0.5 s of fast motion (the dynamics effects)."""
-    if e.fast_time < 0.5:
-        return f"fast motion {e.fast_time:.1f} s: expected >= 0.5 s faster than 0.3 rad/s (dynamics)"
+    """Fast motion (the dynamics effects): at least ``MIN_SPAN`` samples above the log's fast threshold."""
+    if e.fast_time < e.min_span:
+        return (f"fast motion {e.fast_time:.2g} s (|dq| > {e.v_fast:.2g} rad/s: half the peak {e.v_peak:.2g} "
+                f"rad/s, above the noise floor {e.velocity_noise:.2g} rad/s): expected >= {e.min_span:.2g} s "
+                f"({MIN_SPAN} samples)")
+    return None
+
+
+def slow_and_fast(e: Excitation) -> str | None:
+    """Slow and fast motion: at least ``MIN_SPAN`` samples of each."""
+    if e.slow_time < e.min_span or e.fast_time < e.min_span:
+        return (f"slow motion {e.slow_time:.2g} s ({e.v_hold:.2g} to {e.v_fast:.2g} rad/s), fast motion "
+                f"{e.fast_time:.2g} s (> {e.v_fast:.2g} rad/s): expected >= {e.min_span:.2g} s ({MIN_SPAN} "
+                "samples) of each")
+    return None
+
+
+def held(e: Excitation) -> str | None:
+    """Holding still: at least ``MIN_SPAN`` samples below the log's hold threshold."""
+    if e.hold_time < e.min_span:
+        return (f"hold time {e.hold_time:.2g} s (|dq| < {e.v_hold:.2g} rad/s, {NOISE_MULTIPLE:g} x the noise floor "
+                f"or {100 * HOLD_FRACTION:g} % of the peak): expected >= {e.min_span:.2g} s ({MIN_SPAN} samples)")
     return None

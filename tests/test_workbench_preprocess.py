@@ -97,3 +97,15 @@ def test_log_velocity_skips_the_faster_derivative_check():
     from servotau.identification.workbench.data import faster_derivative
 
     assert faster_derivative(ds) is None
+
+
+def test_faster_derivative_runs_when_the_window_is_already_five_samples():
+    """At 7-16 ms the chosen window is often the shortest (5 samples): the check falls back to the central
+    difference (3 samples) instead of not running."""
+    from servotau.identification.workbench.data import faster_derivative
+
+    ds = load_dataset(_log(10e-3, 1e-5, duration=40.0), dq_window=5)
+    fast = faster_derivative(ds)
+    assert fast is not None and fast[1] == 3
+    q, dt = ds.signals["q"], ds.dt
+    assert np.allclose(fast[0].signals["dq"][5:-5], (q[6:-4] - q[4:-6]) / (2 * dt))

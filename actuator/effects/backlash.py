@@ -12,13 +12,14 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation, has_torque
+from ..excitation import Excitation, ResolvedGrid, has_torque, lag_resolved
 from ..registry import Effect
 from ..signals import INERTIA_LAGS, OnlineInertia, Signals, inertia
 
 ORDER = 80
-GRID = tuple({"window": w, "tau_band": b, "gain": g, "lag": lag}
-             for w in (0.011, 0.021) for b in (2.0, 5.0, 10.0) for g in (1.0, 3.0) for lag in INERTIA_LAGS)
+SHAPES = tuple({"window": w, "tau_band": b, "gain": g, "lag": lag}
+               for w in (0.011, 0.021) for b in (2.0, 5.0, 10.0) for g in (1.0, 3.0) for lag in INERTIA_LAGS)
+GRID = ResolvedGrid(SHAPES, ("window", "lag"))  # the acceleration windows and lags the sample period resolves
 
 
 def backlash(s: Signals, window: float, tau_band: float, gain: float, lag: float = 0.0) -> np.ndarray:
@@ -40,12 +41,13 @@ class BacklashOnline(OnlineInertia):
 
 
 def needs(e: Excitation) -> str | None:
-    """Torque reversals: the gear must cross its play."""
+    """An acceleration window the sample period resolves, and torque reversals: the gear must cross its play."""
     if e.torque_range is None:
         return has_torque(e)
     if e.torque_reversals < 2:
-        return f"{e.torque_reversals} torque sign changes: expected >= 2 (the gear must cross its play)"
-    return None
+        return (f"{e.torque_reversals} torque sign changes beyond +-{e.tau_threshold:.2g} N m: expected >= 2 (the gear "
+                "must cross its play)")
+    return lag_resolved(e, GRID, "acceleration window")
 
 
 EFFECT = Effect(

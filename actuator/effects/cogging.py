@@ -17,6 +17,7 @@ from ..signals import Signals
 
 ORDER = 90
 GRID = tuple({"period": p} for p in np.geomspace(0.01, 0.32, 11).round(4).tolist())  # [rad]
+SAMPLES_PER_PERIOD = 4  # positions sampled per ripple period (at most the largest gap apart) that resolve a ripple
 
 
 def cogging(s: Signals, period: float, phase: float = 0.0) -> np.ndarray:
@@ -42,7 +43,13 @@ def needs(e: Excitation) -> str | None:
     if e.position_range is None:
         return "no position column"
     if e.position_range[1] - e.position_range[0] < 0.05:
-        return "position range < 0.05 rad: expected a sweep over several ripple periods"
+        return (f"position range {e.position_range[1] - e.position_range[0]:.3g} rad: expected >= 0.05 rad, a sweep "
+                "over several ripple periods")
+    longest = max(g["period"] for g in GRID)
+    if e.position_gap is not None and e.position_gap * SAMPLES_PER_PERIOD > longest:
+        return (f"cannot tell: the positions sampled leave gaps of {e.position_gap:.3g} rad: a ripple needs "
+                f">= {SAMPLES_PER_PERIOD} positions per period, so periods >= "
+                f"{SAMPLES_PER_PERIOD * e.position_gap:.3g} rad (the grid's longest is {longest:g} rad)")
     return None
 
 

@@ -11,12 +11,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation, fast_motion
+from ..excitation import Excitation, ResolvedGrid, fast_motion, lag_resolved
 from ..registry import Effect
 from ..signals import Signals, delayed, ticks
 
 ORDER = 140
-GRID = tuple({"delay": v} for v in (0.002, 0.005, 0.01, 0.02))  # [s]
+SHAPES = tuple({"delay": v} for v in (0.002, 0.005, 0.01, 0.02))  # [s]
+GRID = ResolvedGrid(SHAPES, ("delay",))  # the delays the sample period resolves
 
 
 def delay(s: Signals, delay: float) -> np.ndarray:
@@ -46,7 +47,8 @@ class DelayOnline:
 
 
 def needs(e: Excitation) -> str | None:
-    return fast_motion(e)
+    """A delay the sample period resolves, and fast motion."""
+    return lag_resolved(e, GRID, "delay") or fast_motion(e)
 
 
 EFFECT = Effect(

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..excitation import Excitation, fast_motion
+from ..excitation import Excitation, ResolvedGrid, fast_motion, lag_resolved
 from ..registry import Effect
 from ..signals import INERTIA_LAGS, OnlineInertia, Signals, inertia
 
 ORDER = 120
-GRID = tuple({"window": w, "lag": lag} for w in (0.011, 0.021, 0.041, 0.081) for lag in INERTIA_LAGS)
+SHAPES = tuple({"window": w, "lag": lag} for w in (0.011, 0.021, 0.041, 0.081) for lag in INERTIA_LAGS)
+GRID = ResolvedGrid(SHAPES, ("window", "lag"))  # the acceleration windows and lags the sample period resolves
 
 
 def elastic(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
@@ -22,7 +23,8 @@ def elastic(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
 
 
 def needs(e: Excitation) -> str | None:
-    return fast_motion(e)
+    """An acceleration window the sample period resolves, and fast motion."""
+    return lag_resolved(e, GRID, "acceleration window") or fast_motion(e)
 
 
 EFFECT = Effect(

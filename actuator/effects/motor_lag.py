@@ -9,12 +9,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation, fast_motion
+from ..excitation import Excitation, ResolvedGrid, fast_motion, lag_resolved
 from ..registry import Effect
 from ..signals import OnlineLag, Signals, lowpass
 
 ORDER = 130
-GRID = tuple({"time_constant": v} for v in (0.005, 0.01, 0.02, 0.05))  # [s]
+SHAPES = tuple({"time_constant": v} for v in (0.005, 0.01, 0.02, 0.05))  # [s]
+GRID = ResolvedGrid(SHAPES, ("time_constant",))  # the time constants the sample period resolves
 
 
 def motor_lag(s: Signals, time_constant: float) -> np.ndarray:
@@ -34,7 +35,8 @@ class MotorLagOnline(OnlineLag):
 
 
 def needs(e: Excitation) -> str | None:
-    return fast_motion(e)
+    """A time constant the sample period resolves, and fast motion."""
+    return lag_resolved(e, GRID, "time constant") or fast_motion(e)
 
 
 EFFECT = Effect(

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation, both_directions
+from ..excitation import Excitation, both_directions, held
 from ..registry import Effect
 from ..signals import Signals, direction_latch
 
@@ -43,9 +43,7 @@ class StictionOnline:
 
 def needs(e: Excitation) -> str | None:
     """Holds after motion, in both directions."""
-    if e.hold_time < 0.5:
-        return f"hold time {e.hold_time:.1f} s: expected >= 0.5 s of holding still after motion"
-    return both_directions(e)
+    return held(e) or both_directions(e)
 
 
 EFFECT = Effect(

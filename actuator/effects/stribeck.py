@@ -10,7 +10,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation, both_directions
+from ..excitation import Excitation, both_directions, slow_and_fast
 from ..registry import Effect
 from ..signals import Signals, smooth_sign, smooth_sign_scalar
 
@@ -30,10 +30,7 @@ def scalar(x: Mapping[str, float], v_s: float, v_eps: float) -> float:
 
 def needs(e: Excitation) -> str | None:
     """Slow and fast motion: the Stribeck curve needs several speeds."""
-    if e.slow_time < 0.5 or e.fast_time < 0.5:
-        return (f"slow motion {e.slow_time:.1f} s, fast motion {e.fast_time:.1f} s: expected >= 0.5 s of each "
-                "(the Stribeck curve needs several speeds)")
-    return both_directions(e)
+    return slow_and_fast(e) or both_directions(e)
 
 
 EFFECT = Effect(

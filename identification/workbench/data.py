@@ -27,6 +27,15 @@ The torque is smoothed by a centred SG filter (order 2: no delay), its window ch
 the torque's own noise. The notes give the source and window (samples and seconds) of each. Windows are in
 samples of the median time step; time steps longer than ``RUN_GAP`` periods end a run (filters do not
 cross them) and are counted in the notes. Rows with NaN or inf in a used column are dropped and counted.
+
+Bad input gets a note, never a silent guess: jittered time stamps are treated as uniform (the filters assume
+the median period) and the note gives the jitter measured (robust spread of the steps, and the largest); beyond
+``JITTER_TOL`` the lag-like effects cannot be told (:mod:`~servotau.actuator.excitation`). A constant column is
+named; a constant torque, velocity or acceleration carries no information and is not used (the velocity is then
+differentiated from ``q``). Values implausible in the unit the role expects
+(:func:`~servotau.actuator.excitation.unit_doubts`:
+a position over several turns, a servo error over a radian, a torque over kN m) are noted; the diagnosis then
+cannot tell the effects that read them.
 """
 
 from __future__ import annotations
@@ -38,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from servotau.actuator.excitation import JITTER_TOL, period_jitter, unit_doubts
 from servotau.actuator.signals import Signals
 from servotau.errors import IdentificationError
 
@@ -49,9 +59,11 @@ __all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "Dataset", "align_to
 
 log = logging.getLogger(__name__)
 MIN_WINDOW = 5  # [samples] shortest SG window considered by cv_window
+FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 over 3 samples: the central difference)
 MAX_WINDOW = 101  # [samples] longest SG window considered by cv_window
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
+PERIOD_JUMPS = 0.05  # fraction of long time steps beyond which the period jumps (the log is resampled)
 RUN_GAP = 1.5  # [periods] a longer time step ends a run of samples (filters do not cross it)
 _SIGNAL_OF_ROLE = {"position": "q", "command": "q_des", "torque": "tau", "velocity": "dq", "acceleration": "ddq",
                    "time": "t"}
@@ -70,7 +82,8 @@ class Dataset:
         source: Where the data came from (file name or "table").
         joint: Joint name, or None.
         n_dropped: Rows dropped for NaN or inf.
-        notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q").
+        notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q"), and what looked wrong
+            (jitter, gaps, constant columns, implausible units).
         preprocessing: Per derived signal (``dq``, ``tau``): ``source`` ("log", "derivative of q",
             "smoothed") and, when filtered, ``window`` [samples] and ``seconds``.
     """
@@ -146,8 +159,13 @@ def load_dataset(
     if not columns:
         raise IdentificationError(f"{name}: no numeric column: expected a table of samples")
     roles, joint = resolve_roles(columns, joint, roles)
-    used = {role: columns[col] for role, col in roles.items()}
     notes = [estimated] if estimated else []
+    kept = _drop_constant(columns, dict(roles), notes)
+    dropped = {col for role, col in roles.items() if role not in kept}
+    roles = kept
+    if "time" in roles:
+        columns = _uniform(columns, roles, notes)
+    used = {role: columns[col] for role, col in roles.items()}
     n_total = len(next(iter(columns.values())))
     valid = np.ones(n_total, dtype=bool)
     for role, arr in used.items():
@@ -182,6 +200,9 @@ def load_dataset(
         if jumps:
             notes.append(f"time: {jumps} steps longer than {RUN_GAP} x the median period {1e3 * dt:.3g} ms "
                          "(filters restart there)")
+        jitter = _jitter_note(used["time"][valid], dt)
+        if jitter:
+            notes.append(jitter)
     if "velocity" not in roles:
         if "position" not in roles:
             raise IdentificationError("no velocity: expected a velocity column or a position column to differentiate")
@@ -219,6 +240,7 @@ def load_dataset(
         else:
             wt = _window(smooth_torque_s, dt)
             how = "given"
+        sig["tau_raw"] = sig["tau"]  # its noise floor scales the excitation's torque thresholds
         sig["tau"] = _differentiate(used["torque"], runs, dt, 0, wt)[valid]
         prep["tau"] = {"source": "smoothed", "window": int(wt), "seconds": float(wt * dt), "order": 2,
                        "chosen": "cross-validation" if smooth_torque_s is None else "given"}
@@ -229,21 +251,25 @@ def load_dataset(
     else:
         target = used["command"][valid] - used["position"][valid]
     for col, arr in columns.items():
-        if col not in sig:
+        if col not in sig and col not in dropped:
             sig[col] = arr[valid]
     n = int(valid.sum())
     segment = used["segment"][valid] if "segment" in roles else None
+    for doubt in unit_doubts(sig.get("q"), target if "command" in roles else None, sig.get("tau_raw", sig.get("tau"))):
+        notes.append(f"units: {doubt}")
+        log.warning("%s: %s", name, doubt)
     return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes), prep)
 
 
 def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] | None:
     """``ds`` with ``dq`` (and ``ddq``) differentiated with ``factor`` times the window (odd, at least
-    ``MIN_WINDOW``), and that window; None when the velocity is the log's own or the window cannot shrink.
-    The check of :func:`~.diagnose.diagnose` that a lag-like effect is not the differentiation's own lag."""
+    ``FAST_MIN_WINDOW``: a window of 5 samples shrinks to the central difference), and that window; None when the
+    velocity is the log's own or the window cannot shrink. The check of :func:`~.diagnose.diagnose` that a
+    lag-like effect is not the differentiation's own lag."""
     info = ds.preprocessing.get("dq", {})
     if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
         return None
-    w = max(MIN_WINDOW, int(round(factor * info["window"])) | 1)
+    w = max(FAST_MIN_WINDOW, int(round(factor * info["window"])) | 1)
     if w >= info["window"]:
         return None
     t = ds.signals["t"] if "t" in ds.signals else None
@@ -274,6 +300,69 @@ def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | Non
     note = (f"est/tau/{joint}, est/dq/{joint}: {OFFLINE_ESTIMATE} (identification/data/aligned.py, as "
             "`servotau identify fit`), not the simulator's ground truth")
     return {**columns, f"est/tau/{joint}": s.tau, f"est/dq/{joint}": s.dq}, note
+
+
+def _drop_constant(columns: Mapping[str, np.ndarray], roles: dict[str, str], notes: list[str]) -> dict[str, str]:
+    """``roles`` without a constant torque, velocity or acceleration column (they carry no information; the
+    velocity is then differentiated from ``q``); every constant column of a role is noted."""
+    for role, col in list(roles.items()):
+        if role in ("time", "segment"):
+            continue
+        x = columns[col][np.isfinite(columns[col])]
+        if x.size and np.ptp(x) == 0.0:
+            dropped = role in ("torque", "velocity", "acceleration") and (role != "velocity" or "position" in roles)
+            notes.append(f"column '{col}' (role {role}) is constant (= {x[0]:.6g}): it carries no information"
+                         + ("; not used" if dropped else "; effects that read it cannot be told"))
+            log.warning("%s", notes[-1])
+            if dropped:
+                del roles[role]
+    return roles
+
+
+def _uniform(columns: Mapping[str, np.ndarray], roles: Mapping[str, str], notes: list[str]) -> dict[str, np.ndarray]:
+    """``columns`` resampled onto a uniform grid when the sample period jumps (more than ``PERIOD_JUMPS`` of the
+    steps are longer than ``RUN_GAP`` median periods, the others within ``JITTER_TOL``: another period, not a few
+    gaps nor jitter): the grid's period is the
+    90th percentile of the steps (no sample is invented between coarse ones), values linear between the
+    neighbouring samples (the segment label: the nearest sample's), grid points farther than a period from every
+    sample dropped (the gaps stay gaps). Otherwise ``columns`` unchanged."""
+    t = columns[roles["time"]]
+    ok = np.isfinite(t)
+    steps = np.diff(t[ok])
+    if steps.size < 2 or np.any(steps <= 0):
+        return dict(columns)  # load_dataset names the fault
+    dt = float(np.median(steps))
+    long = float(np.mean(steps > RUN_GAP * dt))
+    if long <= PERIOD_JUMPS or period_jitter(t[ok], dt)[0] > JITTER_TOL:
+        return dict(columns)  # a few gaps, or jitter (noted by load_dataset), not another period
+    period = float(np.quantile(steps, 0.9))
+    grid = np.arange(t[ok][0], t[ok][-1] + 0.5 * period, period)
+    src = t[ok]
+    k = np.clip(np.searchsorted(src, grid), 1, len(src) - 1)
+    near = np.where(grid - src[k - 1] <= src[k] - grid, k - 1, k)
+    keep = np.abs(src[near] - grid) <= period
+    grid, near = grid[keep], near[keep]
+    out = {}
+    for col, x in columns.items():
+        x = np.asarray(x, dtype=np.float64)[ok]
+        out[col] = x[near] if col == roles.get("segment") else np.interp(grid, src, x)
+    out[roles["time"]] = grid
+    notes.append(f"time: the sample period jumps ({100 * long:.0f} % of the steps are longer than {RUN_GAP} x the "
+                 f"median {1e3 * dt:.3g} ms): resampled onto a uniform {1e3 * period:.3g} ms grid (linear "
+                 f"interpolation, {len(src)} -> {len(grid)} rows)")
+    log.warning("%s", notes[-1])
+    return out
+
+
+def _jitter_note(t: np.ndarray, dt: float) -> str | None:
+    """A note on jittered time stamps (steps within ``RUN_GAP`` periods that are not the median period), or None."""
+    spread, worst = period_jitter(t, dt)
+    if worst < 0.01:
+        return None
+    how = ("treated as uniform (the filters assume the median period)" if spread <= JITTER_TOL else
+           f"more than {100 * JITTER_TOL:.0f} %: treated as uniform, but the lag-like effects cannot be told")
+    return (f"time: steps jitter by {100 * spread:.0f} % of the median period {1e3 * dt:.3g} ms (robust spread; "
+            f"largest {100 * worst:.0f} %): {how}")
 
 
 def _window(seconds: float, dt: float) -> int:

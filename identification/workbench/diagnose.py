@@ -50,6 +50,7 @@ from dataclasses import replace
 import numpy as np
 
 from servotau.actuator import Effect, Loss, excitation_report, resolve_effects
+from servotau.actuator.excitation import units_plausible
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
@@ -57,7 +58,7 @@ from .data import Dataset, faster_derivative
 from .evaluate import compare, error_of
 from .model import FittedModel, ModelSpec, Term, fit_spec, resolve_shapes, solve
 from .probes import FoldBase, base_per_fold, probe_gains
-from .verdict import Candidate, Confusion, Diagnosis, verdict_of
+from .verdict import Candidate, Confusion, Diagnosis, recheck_probes, verdict_of
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
 
@@ -190,7 +191,7 @@ def diagnose(
         if missing:
             ranking.append(_untestable(eff, f"needs signal(s) {missing}: not in the log"))
             continue
-        reason = eff.needs(exc) if eff.needs is not None else None
+        reason = units_plausible(exc) or (eff.needs(exc) if eff.needs is not None else None)
         pred, failures = _score_effect(ds, eff, bases, loss, cache)
         if np.isnan(pred).any():
             ranking.append(_untestable(eff, f"no shape could be fitted: {failures[0] if failures else '?'}"))
@@ -253,7 +254,8 @@ def diagnose(
             ranking[0] = replace(top, remaining=rem, partial=partial)
         except IdentificationError:
             pass
-    return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain)
+    probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
+    return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
 
 
 def _gain_with(ds: Dataset, spec: ModelSpec, eff: Effect, loss: Loss, folds: list[Fold]) -> float:

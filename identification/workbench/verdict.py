@@ -1,6 +1,11 @@
 """The diagnosis's result (:class:`Diagnosis`, its :class:`Candidate` effects and :class:`Confusion`) and its
 verdict (see :mod:`.diagnose`): ``missing_effect``, ``unexplained`` or ``no_missing_effect``, with the message
 that says why, the experiments that separate look-alike effects, and the residual's tail.
+
+The probes that the workbench's own differentiation can feed (``CHECKED_PROBES``) call a log ``unexplained`` only
+if they survive a faster derivative (:func:`recheck_probes`). A log whose units are doubted or whose joint never
+moves (:class:`~servotau.actuator.Excitation`'s ``unit_doubts`` and ``faults``) gets a message that starts
+"cannot tell which effect" (every effect is then untestable).
 """
 
 from __future__ import annotations
@@ -14,10 +19,11 @@ import numpy as np
 from servotau.actuator import EXPERIMENTS, Excitation, get_effect
 from servotau.errors import IdentificationError
 
-from .data import Dataset
-from .evaluate import Comparison
-from .model import FittedModel, ModelSpec, design
-from .probes import MEMORY_HORIZON_S, memory_candidates
+from ..data.folds import Fold
+from .data import Dataset, faster_derivative
+from .evaluate import Comparison, error_of
+from .model import FittedModel, ModelSpec, design, fit_spec
+from .probes import MEMORY_HORIZON_S, base_per_fold, memory_candidates, probe_gains
 
 PROBE_FACTOR = 2.0
 """A probe (tens of free parameters) names ``unexplained`` structure from ``PROBE_FACTOR * min_gain`` on."""
@@ -30,6 +36,11 @@ model fails at its limit (saturation). Residuals of real servos are heavy-tailed
 carry two thirds of the squared error of the simulated default servo), hence the second condition."""
 
 VERDICTS = ("missing_effect", "no_missing_effect", "unexplained")
+
+CHECKED_PROBES = ("dynamics", "memory")
+"""Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
+velocity's window): before they call a log ``unexplained`` they are re-run with the faster derivative
+(:func:`recheck_probes`), and the smaller gain counts."""
 
 
 @dataclass(frozen=True)
@@ -119,6 +130,8 @@ class Diagnosis:
         min_gain: Threshold used.
         confusion: The top two effects if they are a documented confusable pair (or nearly tie).
         message: One-paragraph human summary.
+        checks: What the checks against the workbench's own preprocessing changed (e.g. a probe re-run with a
+            faster derivative), one sentence each.
     """
 
     verdict: str
@@ -131,6 +144,7 @@ class Diagnosis:
     message: str = ""
     experiments: Mapping[str, str] = field(default_factory=dict)
     tail_share: float = 0.0
+    checks: tuple[str, ...] = ()
 
     @property
     def top(self) -> Candidate | None:
@@ -166,6 +180,7 @@ class Diagnosis:
             "untestable": {c.effect: c.reason for c in self.ranking if not c.testable},
             "experiments": dict(self.experiments),
             "tail_share": _r(self.tail_share),
+            "checks": list(self.checks),
             "train": self.base.train.to_dict(),
             "heldout": None if self.base.heldout is None else self.base.heldout.to_dict(),
             "excitation": self.excitation.to_dict(),
@@ -188,7 +203,44 @@ def _orthogonal_correlation(ds: Dataset, spec: ModelSpec, base: FittedModel, a: 
     return float(ra @ rb / den) if den > 0 else float("nan")
 
 
-def verdict_of(ds, spec, base, ranking, probes, exc, min_gain) -> Diagnosis:
+def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes: Mapping[str, float],
+                   ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...]]:
+    """``probes`` with the gains of ``CHECKED_PROBES`` that would call the log ``unexplained`` (no effect named)
+    replaced by the smaller of theirs and the same probe's on a faster derivative (:func:`~.data.faster_derivative`);
+    and a sentence per probe that fell below the threshold. Unchanged when an effect is named, no such probe
+    reaches ``PROBE_FACTOR * min_gain`` or the velocity is the log's own."""
+    out = dict(probes)
+    if any(c.testable and c.heldout_gain >= min_gain and c.consistent for c in ranking):
+        return out, ()
+    todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
+    fast = faster_derivative(ds) if todo else None
+    if fast is None:
+        return out, ()
+    fds, w = fast
+    cache: dict = {}
+    try:
+        bases = base_per_fold(fds, spec, loss, folds, cache)
+        pred = np.full(fds.n, np.nan)
+        for b in bases:
+            pred[b.fold.test] = b.pred[b.fold.test]
+        e0 = error_of(fds.target - pred, fds.target, loss)
+        model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
+        again = probe_gains(fds, bases, model, loss, e0)
+    except IdentificationError as exc:
+        return out, (f"the check of the {', '.join(todo)} probe with a faster derivative failed: {exc}",)
+    notes = []
+    w0 = ds.preprocessing["dq"]["window"]
+    for k in todo:
+        g = again.get(k, 0.0)
+        if g < out[k]:
+            if g < PROBE_FACTOR * min_gain:
+                notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % with dq over "
+                             f"{w} samples instead of {w0}: it may be the differentiation's error")
+            out[k] = g
+    return out, tuple(notes)
+
+
+def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str, ...] = ()) -> Diagnosis:
     named = [c for c in ranking if c.testable and c.heldout_gain >= min_gain and c.consistent]
     experiments = {}
     confusion = None
@@ -254,7 +306,14 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain) -> Diagnosis:
     untestable = [c.effect for c in ranking if not c.testable]
     if untestable:
         message += f"; untestable on this data: {', '.join(untestable)}"
-    return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0])
+    if checks:
+        message += "; " + "; ".join(checks)
+    if exc.unit_doubts:
+        message = "cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts) + "); " + message
+    if exc.faults:
+        message = "cannot tell which effect: " + "; ".join(exc.faults) + "; " + message
+    return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0],
+                     checks)
 
 
 

@@ -1,0 +1,86 @@
+"""Testability scaled to the log (issue 18, item 5): the excitation's thresholds come from the log's own velocity
+and torque (peak, noise floor) and its sample period, and an untestable effect says the value measured and the
+one needed. Generated logs, no diagnosis (fast)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from servotau.actuator import Signals, excitation_report, get_effect
+from servotau.actuator.excitation import ResolvedGrid, noise_floor, position_gap
+
+
+def _friction_log(peak=0.005, reverse=True, dt=1e-3, seconds=20.0, seed=0):
+    """A friction-like table: a slow velocity (peak ``peak`` rad/s) and its friction torque with noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, dt)
+    v = peak * (np.sin(2 * np.pi * 0.2 * t) if reverse else 0.6 + 0.4 * np.sin(2 * np.pi * 0.2 * t))
+    v = v + 2e-5 * rng.standard_normal(len(t))
+    tau = 0.3 * np.tanh(v / 5e-4) + 0.02 * rng.standard_normal(len(t))
+    return Signals({"t": t, "dq": v, "tau": tau}, dt, len(t))
+
+
+def test_slow_reversing_log_still_tests_friction():
+    e = excitation_report(_friction_log())
+    assert e.v_peak < 0.006 and e.velocity_reversals >= 2
+    for name in ("coulomb", "stribeck", "coulomb_asym"):
+        assert get_effect(name).needs(e) is None, name
+
+
+def test_slow_log_without_reversal_says_so_with_the_values():
+    e = excitation_report(_friction_log(reverse=False))
+    reason = get_effect("coulomb").needs(e)
+    assert reason is not None and "never crosses zero" in reason and "0 velocity reversals" in reason
+    assert "expected motion in both directions (>= 2)" in reason
+
+
+def test_thresholds_scale_with_the_log():
+    slow, fast = excitation_report(_friction_log(0.005)), excitation_report(_friction_log(5.0))
+    assert 500 < fast.v_fast / slow.v_fast < 2000  # the same motion a thousand times faster
+    assert slow.velocity_noise == noise_floor(_friction_log(0.005)["dq"]) and slow.velocity_noise > 0
+    assert slow.tau_threshold >= 3 * slow.torque_noise  # sign changes beyond the torque's noise
+
+
+def test_noise_floor_reads_white_noise_not_motion():
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 10.0, 1e-3)
+    x = np.sin(2 * np.pi * 0.5 * t) + 0.01 * rng.standard_normal(len(t))
+    assert abs(noise_floor(x) - 0.01) < 0.001
+
+
+def test_fast_motion_reason_names_measured_and_needed():
+    e = excitation_report(_friction_log(seconds=0.08))  # 80 samples: too few above half the peak
+    reason = get_effect("motor_lag").needs(e)
+    assert reason is not None and "fast motion" in reason and "expected >=" in reason and "50 samples" in reason
+
+
+def test_lag_shapes_need_the_sample_period_to_resolve_them():
+    for name in ("delay", "motor_lag", "elastic", "backlash"):
+        grid = get_effect(name).grid
+        assert isinstance(grid, ResolvedGrid)
+        s1 = _servo_log(1e-3)
+        assert len(get_effect(name).grid_for(s1)) == len(grid.shapes)  # 1 kHz resolves every shape
+        e = excitation_report(_servo_log(0.1))
+        reason = get_effect(name).needs(e)
+        assert reason is not None and reason.startswith("cannot tell: the sample period 100 ms resolves no"), name
+    shapes = get_effect("delay").grid_for(_servo_log(7e-3))
+    assert [g["delay"] for g in shapes] == [0.02]  # 2 periods = 14 ms: only the 20 ms delay
+
+
+def test_cogging_needs_positions_sampled_densely():
+    t = np.arange(0.0, 30.0, 0.1)
+    q = 0.15 * np.sign(np.sin(2 * np.pi * t / 6.5))  # holds at +-0.15 rad, 10 Hz: jumps between
+    s = Signals({"t": t, "q": q, "dq": np.gradient(q, 0.1), "tau": q.copy()}, 0.1, len(t))
+    e = excitation_report(s)
+    assert e.position_gap > 0.2 and get_effect("cogging").needs(e).startswith("cannot tell")
+    sweep = np.linspace(-1, 1, 5000)
+    assert position_gap(sweep) == 0.0
+
+
+def _servo_log(dt, seconds=None):
+    seconds = seconds or max(4.0, 400 * dt)
+    t = np.arange(0.0, seconds, dt)
+    q = 0.3 * np.sin(2 * np.pi * 0.7 * t)
+    dq = 0.3 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t)
+    tau = 10 * np.sin(2 * np.pi * 0.3 * t)
+    return Signals({"t": t, "q": q, "q_des": q + 1e-4 * tau, "dq": dq, "tau": tau}, dt, len(t))

@@ -1,0 +1,163 @@
+"""Bad input (issue 18): jittered or jumping time stamps, gaps, constant columns, velocities that never cross zero,
+tables in other units. Each gets a note in the dataset (and so in the report) and an honest "cannot tell" where
+the log cannot decide, never a crash and never a confident wrong verdict. Small generated logs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support.synthetic import K_TAU, synthetic_table
+
+from servotau.actuator import excitation_report, get_effect
+from servotau.identification.workbench import diagnose, load_dataset, parse_spec
+from servotau.identification.workbench.data import describe
+from servotau.identification.workbench.verdict import VERDICTS
+
+FRICTION = ["coulomb", "stribeck", "delay", "motor_lag"]  # a few effects keep the tests fast
+
+
+def _table(seconds=6.0, **kw):
+    return synthetic_table(seconds=seconds, **kw)
+
+
+def _diagnose(ds, effects=FRICTION):
+    d = diagnose(ds, parse_spec("paper", ds.signals), effects=effects)
+    assert d.verdict in VERDICTS and d.message
+    return d
+
+
+def _note(ds, text):
+    return next((n for n in ds.notes if text in n), None)
+
+
+def test_jittered_time_stamps_are_treated_as_uniform_and_said():
+    cols = _table()
+    rng = np.random.default_rng(1)
+    cols["t"] = cols["t"] + rng.uniform(-0.2e-3, 0.2e-3, len(cols["t"]))  # +-20 % of the 1 ms period
+    ds = load_dataset(cols)
+    note = _note(ds, "jitter")
+    assert note is not None and "treated as uniform" in note and "cannot be told" not in note
+    d = _diagnose(ds)
+    # the truth is paper + coulomb: the jitter of the stamps does not turn into a lag
+    assert d.verdict == "missing_effect" and d.top.effect == "coulomb"
+
+
+def test_large_jitter_leaves_lags_untold():
+    cols = _table()
+    rng = np.random.default_rng(2)
+    cols["t"] = cols["t"] + rng.uniform(-0.45e-3, 0.45e-3, len(cols["t"]))
+    ds = load_dataset(cols)
+    assert "cannot be told" in _note(ds, "jitter")
+    e = excitation_report(ds.signals)
+    for name in ("delay", "motor_lag", "elastic"):
+        reason = get_effect(name).needs(e)
+        assert reason is not None and reason.startswith("cannot tell") and "jitter" in reason
+
+
+def test_period_that_jumps_is_resampled_and_said():
+    cols = _table()
+    t = cols["t"]
+    keep = (t < 3.0) | (np.arange(len(t)) % 2 == 0)  # 1 ms, then 2 ms
+    cols = {k: v[keep] for k, v in cols.items()}
+    ds = load_dataset(cols)
+    note = _note(ds, "period jumps")
+    assert note is not None and "resampled onto a uniform 2 ms grid" in note
+    assert ds.dt == pytest.approx(2e-3)
+    assert set(np.unique(ds.segment)) <= set(np.unique(cols["segment"]))  # labels are not interpolated
+    _diagnose(ds)
+
+
+def test_gaps_restart_the_filters_and_the_diagnosis_runs():
+    cols = _table()
+    cols["t"] = cols["t"].copy()
+    cols["t"][2000:] += 0.2
+    cols["t"][4000:] += 0.5
+    ds = load_dataset(cols)
+    assert _note(ds, "2 steps longer") is not None
+    assert np.all(np.isfinite(ds.signals["dq"]))
+    _diagnose(ds)
+
+
+def test_constant_torque_is_not_used_and_said():
+    cols = _table()
+    cols["q_des"] = cols["q_des"] - K_TAU * cols["tau"]  # a servo without load ...
+    cols["tau"] = np.zeros_like(cols["tau"])  # ... and a torque sensor that reads its zero
+    ds = load_dataset(cols)
+    note = _note(ds, "constant")
+    assert note is not None and "'tau' (role torque)" in note and "not used" in note
+    assert "tau" not in ds.signals
+    d = _diagnose(ds, ["coulomb", "backlash", "load_friction"])
+    assert "not in the log" in d.candidate("backlash").reason
+    assert d.verdict == "missing_effect" and d.top.effect == "coulomb"  # K_TAU tau is 0: coulomb is the truth
+
+
+def test_constant_velocity_column_is_replaced_by_the_derivative_of_q():
+    cols = _table()
+    cols["dq"] = np.full_like(cols["dq"], 0.25)
+    ds = load_dataset(cols)
+    assert "'dq' (role velocity)" in _note(ds, "constant")
+    assert ds.preprocessing["dq"]["source"] == "derivative of q"
+    assert np.std(ds.signals["dq"]) > 0.05
+
+
+def test_constant_command_is_said_and_the_diagnosis_runs():
+    cols = _table()
+    cols["q_des"] = np.full_like(cols["q_des"], 0.5)
+    ds = load_dataset(cols)
+    assert "effects that read it cannot be told" in _note(ds, "'q_des' (role command)")
+    _diagnose(ds, ["coulomb", "delay"])
+
+
+def test_velocity_that_never_crosses_zero_says_so():
+    ds = load_dataset(_table(reversals=False))
+    d = _diagnose(ds, ["coulomb", "stribeck", "coulomb_asym"])
+    for name in ("coulomb", "stribeck", "coulomb_asym"):
+        c = d.candidate(name)
+        assert not c.testable and "never crosses zero" in c.reason
+    assert d.verdict != "missing_effect"
+
+
+def _big_motion(seconds=6.0):
+    cols = _table(seconds)
+    t = cols["t"]
+    q = 1.5 * np.sin(2 * np.pi * 0.3 * t)  # +-1.5 rad: +-86 degrees
+    dq = 1.5 * 2 * np.pi * 0.3 * np.cos(2 * np.pi * 0.3 * t)
+    err = cols["q_des"] - (cols["q"] - 0.0)  # the synthetic servo error [rad]
+    return {**cols, "q": q, "q_des": q + err, "dq": dq}
+
+
+def test_table_in_degrees_cannot_tell():
+    cols = _big_motion()
+    deg = {**cols, "q": np.degrees(cols["q"]), "q_des": np.degrees(cols["q_des"]), "dq": np.degrees(cols["dq"])}
+    ds = load_dataset(deg)
+    note = _note(ds, "units:")
+    assert note is not None and "degrees?" in note
+    d = _diagnose(ds)
+    assert d.verdict != "missing_effect" and d.message.startswith("cannot tell which effect: units doubted")
+    assert all(not c.testable and c.reason.startswith("cannot tell: units doubted") for c in d.ranking)
+    assert any("degrees?" in line for line in describe(ds))  # the report's header lines carry the note
+
+
+def test_torque_in_millinewton_metres_cannot_tell():
+    cols = _table()
+    ds = load_dataset({**cols, "tau": 1e3 * cols["tau"]})
+    assert "mN m?" in _note(ds, "units:")
+    d = _diagnose(ds, ["coulomb"])
+    assert d.verdict != "missing_effect" and "mN m?" in d.message
+
+
+def test_plausible_log_has_no_unit_note():
+    ds = load_dataset(_big_motion())
+    assert _note(ds, "units:") is None and not excitation_report(ds.signals).unit_doubts
+
+
+def test_constant_position_cannot_tell():
+    cols = _table(4.0)
+    cols.pop("dq")
+    cols["q"] = np.full_like(cols["q"], 0.3)
+    ds = load_dataset(cols)
+    assert "effects that read it cannot be told" in _note(ds, "'q' (role position)")
+    d = _diagnose(ds, ["coulomb", "delay"])
+    assert d.verdict != "missing_effect"
+    assert d.message.startswith("cannot tell which effect: the position never changes")
+    assert all(not c.testable for c in d.ranking)
