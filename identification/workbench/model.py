@@ -26,8 +26,8 @@ from servotau.errors import IdentificationError
 from ..asymmetric import asymmetric_cost
 from ..fit import fit_with_loss
 from ..regressors import Regressors
-from ..validation import MAX_CONDITION, MIN_SAMPLES_PER_PARAMETER, check_min_samples
-from .gram import Normal, loss_of, near_ties
+from ..validation import MIN_SAMPLES_PER_PARAMETER, check_min_samples
+from .gram import Normal, UNormal, check_condition, check_excited, loss_of, near_ties, solve_gram
 
 FIXED_POINT = 4
 LINEAR_SIGNAL = {K_TAU: "tau", K_V: "dq", OFFSET: None}  # None: the constant column
@@ -248,44 +248,12 @@ def solve(
     n, k = a.shape
     check_min_samples(n, MIN_SAMPLES_PER_PARAMETER * k, f"fit (coefficients {names})")
     ms = np.einsum("ij,ij->j", a, a) / n
-    _check_excited(names, ms, a.sum(axis=0) / n)
+    check_excited(names, ms, a.sum(axis=0) / n)
     scale = np.sqrt(ms)
     an = a / scale
     gram = an.T @ an
-    _check_condition(names, gram, n)
+    check_condition(names, gram, n)
     return np.linalg.solve(gram, an.T @ b) / scale
-
-
-def solve_gram(names: list[str], gram: np.ndarray, atb: np.ndarray, colsum: np.ndarray, n: int) -> np.ndarray:
-    """:func:`solve` by least squares from the normal equations of the ``n`` rows: ``gram = A.T A``,
-    ``atb = A.T b`` and the column sums of ``A`` (see :mod:`.gram`); the same scaling and refusals."""
-    check_min_samples(n, MIN_SAMPLES_PER_PARAMETER * len(names), f"fit (coefficients {names})")
-    ms = np.diag(gram) / n
-    _check_excited(names, ms, colsum / n)
-    scale = np.sqrt(ms)
-    gn = gram / np.outer(scale, scale)
-    _check_condition(names, gn, n)
-    return np.linalg.solve(gn, atb / scale) / scale
-
-
-def _check_excited(names: list[str], ms: np.ndarray, mean: np.ndarray) -> None:
-    """Refuse a zero or constant column (``ms``: mean square, ``mean``: mean of each column) but the offset."""
-    for j, name in enumerate(names):
-        if name == OFFSET:
-            continue
-        if not ms[j] > 0.0 or ms[j] - mean[j] ** 2 <= 1e-20 * ms[j]:
-            raise IdentificationError(f"regressor column '{name}' is zero or constant: no excitation")
-
-
-def _check_condition(names: list[str], gram: np.ndarray, n: int) -> None:
-    """Refuse dependent columns: condition number of the column-scaled ``gram`` above ``MAX_CONDITION``."""
-    eig = np.linalg.eigvalsh(gram / n)
-    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
-    if not cond <= MAX_CONDITION:
-        raise IdentificationError(
-            f"regressor columns {names} are linearly dependent (condition number {cond:.3g}): "
-            f"expected <= {MAX_CONDITION:g}"
-        )
 
 
 def _solve_with_offset(names: list[str], a: np.ndarray, b: np.ndarray, loss: Loss) -> np.ndarray:
@@ -344,21 +312,49 @@ def fit_spec(
         full, coefs = fold_coefficients(solve(names, a, target, loss, rows, drop_unexcited), spec, slices)
         return FittedModel(full, coefs, loss)
     best, best_err = None, np.inf
+    normal = _u_normal(signals, target, spec, loss, rows, cache, drop_unexcited)
     for _ in range(FIXED_POINT):
         try:
-            names, a, slices = design(signals, spec, ctx, cache)
-            x = solve(names, a, target, loss, rows, drop_unexcited)
+            if normal is not None:
+                names, x, slices = normal.solve(signals, ctx)
+            else:
+                names, a, slices = design(signals, spec, ctx, cache)
+                x = solve(names, a, target, loss, rows, drop_unexcited)
         except IdentificationError:
             if best is None:
                 raise
             break  # this round's u leaves a column unexcited (e.g. a threshold never reached): keep the best
         full, coefs = fold_coefficients(x, spec, slices)
         model = FittedModel(full, coefs, loss)
-        err = _loss_value(model.predict(signals), target, loss, rows)
+        ctx = model.context(signals)
+        err = _loss_value(_predict_in(model, signals, ctx), target, loss, rows)
         if err < best_err:
             best, best_err = model, err
-        ctx = model.context(signals)
     return best
+
+
+def _u_normal(signals, target, spec, loss, rows, cache, drop_unexcited) -> UNormal | None:
+    """:class:`~.gram.UNormal` of the fixed point, or None where :func:`solve` is needed (another loss,
+    ``drop_unexcited``, rows given by index, no column that ignores ``u``)."""
+    if loss.kind != "least_squares" or drop_unexcited or (rows is not None and np.asarray(rows).dtype != bool):
+        return None
+    plain = ModelSpec(spec.linear, tuple(t for t in spec.terms if not get_effect(t.effect).uses_model))
+    if not plain.linear and not plain.terms:
+        return None
+    names, a, slices = design(signals, plain, None, cache)
+    return UNormal(spec, names, Normal(a, target, rows), slices)
+
+
+def _predict_in(model: FittedModel, signals: Signals, ctx: Mapping[str, np.ndarray]) -> np.ndarray:
+    """:meth:`FittedModel.predict` given the model's own context ``ctx`` (the same numbers, ``ctx`` not
+    computed again)."""
+    su = signals.with_columns(**ctx)
+    out = ctx["u"].copy()
+    for t in model.spec.terms:
+        eff = get_effect(t.effect)
+        if eff.uses_model:
+            out += model.coefficients[t.effect] * eff.evaluate(su, t.shape)
+    return out
 
 
 def _loss_value(model: np.ndarray, target: np.ndarray, loss: Loss, rows: np.ndarray | None) -> float:
