@@ -37,19 +37,21 @@ class Normal:
         self.w = None if mask is None else mask.astype(np.float64)
         self.n = len(y) if mask is None else int(np.count_nonzero(mask))
         self.base = base
-        self.bw = base if self.w is None else base * self.w[:, None]  # rows outside the mask weigh 0
-        self.yw = y if self.w is None else y * self.w
-        self.gbb = base.T @ self.bw
-        self.by = self.bw.T @ y
-        self.bsum = self.bw.sum(axis=0)
-        self.yty = float(y @ self.yw)
+        w = np.ones(len(y)) if self.w is None else self.w
+        # [base | y | 1] with the rows outside the mask weighted 0: one product gives a candidate's cross terms
+        self.rhs = np.column_stack([base, y, np.ones(len(y))]) * w[:, None]
+        k = base.shape[1]
+        g = base.T @ self.rhs
+        self.gbb, self.by, self.bsum = g[:, :k], g[:, k], g[:, k + 1]
+        self.yty = float(y @ self.rhs[:, k])
 
     def system(self, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The Gram matrix, ``A.T y`` and the column sums of ``A = [base | cols]`` over the rows."""
-        cw = cols if self.w is None else cols * self.w[:, None]
-        gcb = cols.T @ self.bw
-        g = np.block([[self.gbb, gcb.T], [gcb, cols.T @ cw]])
-        return g, np.concatenate([self.by, cols.T @ self.yw]), np.concatenate([self.bsum, cw.sum(axis=0)])
+        k = self.gbb.shape[0]
+        c = cols.T @ self.rhs  # cols against base, y and 1
+        cc = cols.T @ (cols if self.w is None else cols * self.w[:, None])
+        g = np.block([[self.gbb, c[:, :k].T], [c[:, :k], cc]])
+        return g, np.concatenate([self.by, c[:, k]]), np.concatenate([self.bsum, c[:, k + 1]])
 
 
 def loss_of(x: np.ndarray, g: np.ndarray, aty: np.ndarray, yty: float) -> float:
