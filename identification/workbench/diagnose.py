@@ -70,11 +70,11 @@ MIN_GAIN = 0.1
 PARTIAL = 0.75
 """An effect explaining less than this fraction of its family probe's gain is *partially explained*."""
 
-_LS = Loss.least_squares()
-
 REMAINING = 0.05
 """Held-out gain of the named effect's family probe, on the model with the effect, that flags it *partial*
 (when it is also at least a quarter of the effect's own gain)."""
+
+_LS = Loss.least_squares()
 
 
 def _effect_columns(effect: Effect, signals, ctx: dict, shape, cache: dict) -> np.ndarray:
