@@ -56,7 +56,8 @@ from servotau.errors import IdentificationError
 from ..data.folds import Fold, folds_of
 from .data import Dataset, faster_derivative
 from .evaluate import compare, error_of
-from .model import FittedModel, ModelSpec, Term, fit_spec, resolve_shapes, solve
+from .gram import Normal, loss_of, near_ties
+from .model import FittedModel, ModelSpec, Term, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, probe_gains
 from .verdict import Candidate, Confusion, Diagnosis, recheck_probes, verdict_of
 
@@ -74,6 +75,8 @@ REMAINING = 0.05
 """Held-out gain of the named effect's family probe, on the model with the effect, that flags it *partial*
 (when it is also at least a quarter of the effect's own gain)."""
 
+_LS = Loss.least_squares()
+
 
 def _effect_columns(effect: Effect, signals, ctx: dict, shape, cache: dict) -> np.ndarray:
     if effect.uses_model:
@@ -89,35 +92,80 @@ def _score_effect(
 ) -> tuple[np.ndarray, list[str]]:
     """Held-out prediction of base + effect (nested shape choice per block), and fit failures. Shapes whose
     coefficient the effect's physics does not allow (``Effect.coefficient_range``) are not chosen; a block
-    left with none keeps the base model's prediction (the effect adds nothing there)."""
+    left with none keeps the base model's prediction (the effect adds nothing there). Least squares is solved
+    from cross products shared by the blocks (:mod:`.gram`)."""
     y = ds.target
     pred = np.full(ds.n, np.nan)
     failures: list[str] = []
-    for b in bases:
-        best, best_err, rejected = None, np.inf, False
+    fit = _GramFit(bases, y) if loss.kind == "least_squares" else None
+    for i, b in enumerate(bases):
+        tried, rejected = [], False  # tried: (training error, coefficients, columns)
         for shape in effect.grid_for(ds.signals.with_columns(**b.ctx)):
             try:
                 cols = _effect_columns(effect, ds.signals, b.ctx, shape, cache)
-                a = np.column_stack([b.a, cols])
-                names = [*b.names, *(f"{effect.name}#{i}" for i in range(cols.shape[1]))]
-                x = solve(names, a, y, loss, b.fold.train)
+                names = [*b.names, *(f"{effect.name}#{j}" for j in range(cols.shape[1]))]
+                if fit is not None:
+                    x, err = fit(i, names, cols)
+                else:
+                    a = np.column_stack([b.a, cols])
+                    x = solve(names, a, y, loss, b.fold.train)
+                    tr = b.fold.train
+                    err = error_of(y[tr] - (a @ x)[tr], y[tr], loss)
             except IdentificationError as exc:
                 failures.append(str(exc))
                 continue
             if cols.shape[1] == 1 and not effect.admits(x[-1]):
                 rejected = True  # not this effect: a generic correction of the other sign or size
                 continue
-            p = a @ x
-            tr = b.fold.train
-            err = error_of(y[tr] - p[tr], y[tr], loss)
-            if err < best_err:
-                best, best_err = p, err
-        if best is None and rejected:
-            best = b.pred  # no shape with a coefficient the physics allows: the block keeps the base model
+            tried.append((err, x, cols))
+        best = fit.best(i, tried) if fit is not None else _least(tried)
         if best is None:
-            return pred, failures
-        pred[b.fold.test] = best[b.fold.test]
+            if not rejected:
+                return pred, failures
+            pred[b.fold.test] = b.pred[b.fold.test]  # no shape the physics allows: the block keeps the base model
+            continue
+        _, x, cols = best
+        te = b.fold.test
+        k = b.a.shape[1]
+        pred[te] = b.a[te] @ x[:k] + cols[te] @ x[k:]
     return pred, failures
+
+
+def _least(tried: list) -> tuple | None:
+    """The first entry of least error (errors that are not numbers never win)."""
+    best, best_err = None, np.inf
+    for t in tried:
+        if t[0] < best_err:
+            best, best_err = t, t[0]
+    return best
+
+
+class _GramFit:
+    """Least-squares fits of each block's base columns plus candidate columns on the block's training rows,
+    from the normal equations (:mod:`.gram`)."""
+
+    def __init__(self, bases: list[FoldBase], y: np.ndarray):
+        self.y = y
+        self.normal = [Normal(b.a, y, b.fold.train) for b in bases]
+
+    def __call__(self, i: int, names: list[str], cols: np.ndarray) -> tuple[np.ndarray, float]:
+        """Coefficients and training error (RMS, from the normal equations) of block ``i``."""
+        ne = self.normal[i]
+        g, aty, colsum = ne.system(cols)
+        x = solve_gram(names, g, aty, colsum, ne.n)
+        return x, float(np.sqrt(max(loss_of(x, g, aty, ne.yty), 0.0) / ne.n))
+
+    def best(self, i: int, tried: list) -> tuple | None:
+        """:func:`_least`, near ties ordered by their training residuals (the Gram errors lose digits)."""
+        ne = self.normal[i]
+        ties = near_ties([t[0] ** 2 * ne.n for t in tried], ne.yty)
+        if ties:
+            tr = ne.mask
+            y, a = self.y[tr], ne.base[tr]
+            k = a.shape[1]
+            tried = [(error_of(y - (a @ t[1][:k] + t[2][tr] @ t[1][k:]), y, _LS), t[1], t[2])
+                     if j in ties else (np.inf, t[1], t[2]) for j, t in enumerate(tried)]
+        return _least(tried)
 
 
 def _fold_errors(y: np.ndarray, pred: np.ndarray, folds: list[Fold], loss: Loss) -> np.ndarray:

@@ -27,7 +27,8 @@ from servotau.errors import IdentificationError
 from ..asymmetric import asymmetric_cost
 from ..fit import fit_with_loss
 from ..regressors import Regressors
-from ..validation import MAX_CONDITION, MIN_SAMPLES_PER_PARAMETER, check_min_samples
+from ..validation import MIN_SAMPLES_PER_PARAMETER, check_min_samples
+from .gram import Normal, UNormal, check_condition, check_excited, loss_of, near_ties, solve_gram
 
 FIXED_POINT = 4
 LINEAR_SIGNAL = {K_TAU: "tau", K_V: "dq", OFFSET: None}  # None: the constant column
@@ -164,17 +165,12 @@ def design(signals: Signals, spec: ModelSpec, ctx: Mapping[str, np.ndarray] | No
     slices = []
     for t in spec.terms:
         eff = get_effect(t.effect)
-        key = (t.effect, tuple(sorted(t.shape.items())))
         if eff.uses_model:
             if ctx is None:
                 raise IdentificationError(f"term '{t.effect}' reads u: expected the linear part of a model")
             m = eff.columns(su, t.shape)
-        elif cache is not None and key in cache:
-            m = cache[key]
         else:
-            m = eff.columns(signals, t.shape)
-            if cache is not None:
-                cache[key] = m
+            m = effect_columns(eff, signals, t.shape, cache)
         start = len(names)
         k = m.shape[1]
         names += [t.effect] if k == 1 else [f"{t.effect}#{i}" for i in range(k)]
@@ -183,6 +179,17 @@ def design(signals: Signals, spec: ModelSpec, ctx: Mapping[str, np.ndarray] | No
     if not cols:
         raise IdentificationError("model has no coefficient: expected a torque or velocity column")
     return names, np.column_stack(cols), slices
+
+
+def effect_columns(eff, signals: Signals, shape: Mapping[str, float], cache: dict | None) -> np.ndarray:
+    """Columns of an effect that does not read ``u`` at ``shape``, kept in ``cache`` (if given) by effect and shape."""
+    key = (eff.name, tuple(sorted(shape.items())))
+    if cache is not None and key in cache:
+        return cache[key]
+    m = eff.columns(signals, shape)
+    if cache is not None:
+        cache[key] = m
+    return m
 
 
 def solve(
@@ -220,22 +227,11 @@ def solve(
     n, k = a.shape
     check_min_samples(n, MIN_SAMPLES_PER_PARAMETER * k, f"fit (coefficients {names})")
     ms = np.einsum("ij,ij->j", a, a) / n
-    mean = a.sum(axis=0) / n
-    for j in range(k):
-        if names[j] == OFFSET:
-            continue
-        if not ms[j] > 0.0 or ms[j] - mean[j] ** 2 <= 1e-20 * ms[j]:
-            raise IdentificationError(f"regressor column '{names[j]}' is zero or constant: no excitation")
+    check_excited(names, ms, a.sum(axis=0) / n)
     scale = np.sqrt(ms)
     an = a / scale
     gram = an.T @ an
-    eig = np.linalg.eigvalsh(gram / n)
-    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else np.inf
-    if not cond <= MAX_CONDITION:
-        raise IdentificationError(
-            f"regressor columns {names} are linearly dependent (condition number {cond:.3g}): "
-            f"expected <= {MAX_CONDITION:g}"
-        )
+    check_condition(names, gram, n)
     return np.linalg.solve(gram, an.T @ b) / scale
 
 
@@ -295,21 +291,49 @@ def fit_spec(
         full, coefs = fold_coefficients(solve(names, a, target, loss, rows, drop_unexcited), spec, slices)
         return FittedModel(full, coefs, loss)
     best, best_err = None, np.inf
+    normal = _u_normal(signals, target, spec, loss, rows, cache, drop_unexcited)
     for _ in range(FIXED_POINT):
         try:
-            names, a, slices = design(signals, spec, ctx, cache)
-            x = solve(names, a, target, loss, rows, drop_unexcited)
+            if normal is not None:
+                names, x, slices = normal.solve(signals, ctx)
+            else:
+                names, a, slices = design(signals, spec, ctx, cache)
+                x = solve(names, a, target, loss, rows, drop_unexcited)
         except IdentificationError:
             if best is None:
                 raise
             break  # this round's u leaves a column unexcited (e.g. a threshold never reached): keep the best
         full, coefs = fold_coefficients(x, spec, slices)
         model = FittedModel(full, coefs, loss)
-        err = _loss_value(model.predict(signals), target, loss, rows)
+        ctx = model.context(signals)
+        err = _loss_value(_predict_in(model, signals, ctx), target, loss, rows)
         if err < best_err:
             best, best_err = model, err
-        ctx = model.context(signals)
     return best
+
+
+def _u_normal(signals, target, spec, loss, rows, cache, drop_unexcited) -> UNormal | None:
+    """:class:`~.gram.UNormal` of the fixed point, or None where :func:`solve` is needed (another loss,
+    ``drop_unexcited``, rows given by index, no column that ignores ``u``)."""
+    if loss.kind != "least_squares" or drop_unexcited or (rows is not None and np.asarray(rows).dtype != bool):
+        return None
+    plain = ModelSpec(spec.linear, tuple(t for t in spec.terms if not get_effect(t.effect).uses_model))
+    if not plain.linear and not plain.terms:
+        return None
+    names, a, slices = design(signals, plain, None, cache)
+    return UNormal(spec, names, Normal(a, target, rows), slices)
+
+
+def _predict_in(model: FittedModel, signals: Signals, ctx: Mapping[str, np.ndarray]) -> np.ndarray:
+    """:meth:`FittedModel.predict` given the model's own context ``ctx`` (the same numbers, ``ctx`` not
+    computed again)."""
+    su = signals.with_columns(**ctx)
+    out = ctx["u"].copy()
+    for t in model.spec.terms:
+        eff = get_effect(t.effect)
+        if eff.uses_model:
+            out += model.coefficients[t.effect] * eff.evaluate(su, t.shape)
+    return out
 
 
 def _loss_value(model: np.ndarray, target: np.ndarray, loss: Loss, rows: np.ndarray | None) -> float:
@@ -339,10 +363,23 @@ def resolve_shapes(
     free = [t.shape is None for t in spec.terms] if free is None else list(free)
     if len(free) != len(spec.terms):
         raise IdentificationError(f"free = {free}: expected one flag per term of {spec.effect_names}")
+    memo: dict = {}  # the same term with the same others gives the same shape: not fitted again
+
+    def best_shape(others: list[Term], effect: str) -> Term:
+        key = (effect, tuple((o.effect, tuple(sorted(o.shape.items()))) for o in others))
+        if key not in memo:
+            try:
+                memo[key] = _best_shape(signals, target, spec.linear, others, effect, loss, cache)
+            except IdentificationError as exc:
+                memo[key] = exc
+        if isinstance(memo[key], IdentificationError):
+            raise memo[key]
+        return memo[key]
+
     done: list[Term] = []
     for t in spec.terms:
         fixed = t.shape is not None
-        done.append(t if fixed else _best_shape(signals, target, spec.linear, done, t.effect, loss, cache))
+        done.append(t if fixed else best_shape(list(done), t.effect))
     for _ in range(sweeps - 1):
         changed = False
         for i, t in enumerate(done):
@@ -350,7 +387,7 @@ def resolve_shapes(
                 continue
             others = done[:i] + done[i + 1 :]
             try:
-                best = _best_shape(signals, target, spec.linear, others, t.effect, loss, cache)
+                best = best_shape(others, t.effect)
             except IdentificationError:
                 continue  # no other shape fits with these neighbours: keep the current one
             if best.shape != t.shape:
@@ -365,6 +402,9 @@ def _best_shape(signals, target, linear, others: list[Term], effect: str, loss: 
     best, err = None, np.inf
     failures = []
     eff = get_effect(effect)
+    if loss.kind == "least_squares" and (linear or others) and not eff.uses_model \
+            and not any(get_effect(t.effect).uses_model for t in others):
+        return _best_shape_gram(signals, target, ModelSpec(linear, tuple(others)), eff, loss, cache)
     gsig = signals
     if eff.uses_model and callable(eff.grid):  # a data-dependent grid may read u: that of the fixed point's start
         plain = tuple(t for t in others if not get_effect(t.effect).uses_model)
@@ -387,3 +427,39 @@ def _best_shape(signals, target, linear, others: list[Term], effect: str, loss: 
     if best is None:
         raise IdentificationError(f"effect '{effect}': no shape of its grid could be fitted: {failures[0]}")
     return best
+
+
+def _best_shape_gram(signals, target, base: ModelSpec, eff, loss: Loss, cache) -> Term:
+    """:func:`_best_shape` by least squares when no term reads ``u``: the base's columns and products computed
+    once, each shape's fit from the normal equations (:mod:`.gram`); near ties scored as :func:`_best_shape` does."""
+    names0, a0, slices0 = design(signals, base, None, cache)
+    ne = Normal(a0, target)
+    tried, failures = [], []
+    for shape in eff.grid_for(signals):
+        term = Term(eff.name, shape)
+        try:
+            cols = effect_columns(eff, signals, term.shape, cache)
+            k0, k = a0.shape[1], cols.shape[1]
+            names = [*names0, *([eff.name] if k == 1 else [f"{eff.name}#{i}" for i in range(k)])]
+            g, aty, colsum = ne.system(cols)
+            x = solve_gram(names, g, aty, colsum, ne.n)
+        except IdentificationError as exc:
+            failures.append(str(exc))
+            continue
+        full, coefs = fold_coefficients(x, base.plus(term), [*slices0, (eff.name, term.shape, slice(k0, k0 + k))])
+        c = coefs[eff.name]
+        if not eff.admits(c):
+            failures.append(f"shape {dict(shape)}: coefficient {c:.3g} outside {eff.coefficient_range}")
+            continue
+        tried.append((loss_of(x, g, aty, ne.yty), FittedModel(full, coefs, loss)))
+    if not tried:
+        raise IdentificationError(f"effect '{eff.name}': no shape of its grid could be fitted: {failures[0]}")
+    ties = near_ties([t[0] for t in tried], ne.yty)
+    if ties:
+        tried = [(_loss_value(t[1].predict(signals), target, loss, None) if j in ties else np.inf, t[1])
+                 for j, t in enumerate(tried)]
+    best, err = None, np.inf
+    for e, m in tried:
+        if e < err:
+            best, err = m, e
+    return Term(eff.name, best.spec.terms[-1].shape)
