@@ -35,7 +35,9 @@ the squared error (about 0.14 for Gaussian residuals) and most of them sit at th
 model fails at its limit (saturation). Residuals of real servos are heavy-tailed anyway (dead-band crossings
 carry two thirds of the squared error of the simulated default servo), hence the second condition."""
 
-VERDICTS = ("missing_effect", "no_missing_effect", "unexplained")
+VERDICTS = ("missing_effect", "no_missing_effect", "unexplained", "cannot_tell")
+"""``cannot_tell``: the log itself cannot decide (units doubted, a joint that never moves): every effect is
+untestable and the message says why."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
@@ -309,9 +311,10 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
     if checks:
         message += "; " + "; ".join(checks)
     if exc.unit_doubts:
-        message = "cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts) + "); " + message
+        verdict, message = "cannot_tell", ("cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts)
+                                           + "); " + message)
     if exc.faults:
-        message = "cannot tell which effect: " + "; ".join(exc.faults) + "; " + message
+        verdict, message = "cannot_tell", "cannot tell which effect: " + "; ".join(exc.faults) + "; " + message
     return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0],
                      checks)
 
