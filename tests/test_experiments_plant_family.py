@@ -73,6 +73,26 @@ def test_parameter_ranges(seed):
     assert p.truth()["hidden"] == list(p.hidden)
 
 
+def test_every_bench_plant_stays_bounded():
+    """Seeds 0..99 as bench/workbench_family.py draws them (20 s commands, hidden effects from the seed), first 4 s.
+
+    A stable servo's error is its torque over its stiffness (< 0.3 rad in this family); one whose torque limit
+    cannot hold the gravity load lets the link sag toward hanging, still within half a turn. An unstable loop
+    (seed 3 before the motor lag was clipped) passes 500 rad within these 4 s.
+    """
+    plants = [pf.draw_plant(seed) for seed in range(100)]
+    error = np.array([np.max(np.abs(t["q"] - t["q_des"])) for t in pf.simulate(plants, 4.0)])
+    assert np.all(error < np.pi), {p.seed: float(e) for p, e in zip(plants, error, strict=True) if not e < np.pi}
+
+
+def test_motor_lag_keeps_the_servo_loop_damped():
+    """The loop J T s^3 + J s^2 + D s + K of every drawn motor lag has its poles damped (ratio > 0.07)."""
+    for seed in range(2000):
+        p = pf.draw_plant(seed, hidden=("motor_lag",), duration=1.0)
+        poles = np.roots([p.J * p.effect["motor_lag"]["T"], p.J, p.D, p.K])
+        assert np.min(-poles.real / np.abs(poles)) > 0.07, (seed, p.effect)
+
+
 def test_coulomb_is_a_step_at_zero_velocity(family):
     plant, true = family["coulomb"]
     r = _servo_residual(plant, true)

@@ -10,7 +10,8 @@ Plant (angles and torques on the joint side of the gear, SI units)::
     command        r(t) = q_des(t - d)                                  d: delay (0 unless 'delay')
     servo (PD)     u = K_eff (r - q_m) - D dq_m,  K_eff = K (1 - a_th H)  (H: heat, 'thermal_drift')
     driver         u' = dz(u, delta)              dead zone of the driver ('deadzone'), else u' = u
-    motor          T_m dtau_m/dt = u' - tau_m     first-order current loop ('motor_lag'), else tau_m = u'
+    motor          T_m dtau_m/dt = u' - tau_m     first-order current loop ('motor_lag'), else tau_m = u';
+                                                  T_m 3 .. 30 ms, at most 0.7 D / K (the loop stays stable)
                    tau_m clipped to +-tau_max     ('saturation')
     friction       f(dq_m, q_m, tau_j): coulomb, coulomb_asym, stribeck, viscous_power, load_friction, cogging
     rigid joint    J ddq = tau_j - G sin(q + phi),   tau_j = tau_m - f,   q_m = q
@@ -36,6 +37,10 @@ DT = 1e-4        # [s] simulation step
 RECORD = 1e-3    # [s] recording grid (every sample period is a multiple of it)
 DURATION = 20.0  # [s] default log length
 G_REF = 9.81
+# Largest motor lag T [s] as a fraction of the servo's D / K [s]. With the lag, the loop J T s^3 + J s^2 + D s + K
+# is stable only for T < D / K (Routh-Hurwitz, whatever J); at 0.7 D / K its least-damped pole keeps a damping
+# ratio >= 0.077 for servo damping ratios 0.4 .. 1. A lag drawn beyond it (35 % of the 3 .. 30 ms draws) is clipped.
+LAG_MARGIN = 0.7
 
 
 @dataclass(frozen=True)
@@ -153,8 +158,8 @@ def draw_plant(seed: int, hidden: tuple[str, ...] | None = None, *, period: floa
             p[e] = {"gain_drop": rng.uniform(0.15, 0.35), "offset": fr(0.02, 0.06), "tau_th": rng.uniform(4, 10)}
         elif e == "load_friction":
             p[e] = {"mu": rng.uniform(0.05, 0.2)}
-        elif e == "motor_lag":
-            p[e] = {"T": _loguniform(rng, 3e-3, 3e-2)}
+        elif e == "motor_lag":  # at most LAG_MARGIN D / K: the servo loop stays stable (see LAG_MARGIN)
+            p[e] = {"T": min(_loguniform(rng, 3e-3, 3e-2), LAG_MARGIN * D / K)}
         elif e == "delay":
             p[e] = {"d": RECORD * 0.1 * int(round(10 * _loguniform(rng, 2.0, 15.0)))}
         elif e == "saturation":
