@@ -112,7 +112,7 @@ def check_starts(starts: Sequence[int] | None, n: int) -> tuple[int, ...]:
     if starts is None:
         return (0,)
     out = tuple(int(k) for k in starts)
-    if not out or out[0] != 0 or any(b <= a for a, b in zip(out, out[1:])) or (n > 0 and out[-1] >= n):
+    if not out or out[0] != 0 or any(b <= a for a, b in zip(out, out[1:], strict=False)) or (n > 0 and out[-1] >= n):
         raise IdentificationError(f"starts = {list(starts)[:8]}: expected strictly increasing sample indices "
                                   f"from 0, below the {n} samples")
     return out
@@ -123,7 +123,7 @@ def run_bounds(n: int, starts: Sequence[int] | None) -> list[tuple[int, int]]:
     if starts is None or len(starts) <= 1:
         return [(0, n)]
     edges = [*starts, n]
-    return list(zip(edges[:-1], edges[1:]))
+    return list(zip(edges[:-1], edges[1:], strict=False))
 
 
 def per_run(f: Callable[..., np.ndarray], starts: Sequence[int] | None, *xs: np.ndarray) -> np.ndarray:

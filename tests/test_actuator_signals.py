@@ -1,9 +1,24 @@
-"""identification/workbench/signals.py: derived signals computed once per dataset and its copies."""
+"""actuator/signals.py: derived signals computed once per dataset and its copies; filters with memory restart at each
+run of the log."""
 
 import numpy as np
 import pytest
 
-from servotau.actuator.signals import Signals
+from servotau.actuator.friction_state import state, steps
+from servotau.actuator.signals import (
+    Signals,
+    acceleration,
+    command_lead,
+    delayed,
+    direction_latch,
+    hysteresis,
+    inertia,
+    lowpass,
+    run_onsets,
+    sign_latch,
+    since_onset,
+)
+from servotau.errors import IdentificationError
 
 
 def test_derived_is_computed_once_for_a_signals_and_its_copies_and_again_for_another_source():
@@ -27,20 +42,6 @@ def test_derived_is_computed_once_for_a_signals_and_its_copies_and_again_for_ano
 
 
 # -- runs: every filter with memory restarts at each start (hand-computed) -----------------------------------------
-from servotau.actuator.friction_state import state, steps  # noqa: E402
-from servotau.actuator.signals import (  # noqa: E402
-    acceleration,
-    command_lead,
-    delayed,
-    direction_latch,
-    hysteresis,
-    inertia,
-    lowpass,
-    run_onsets,
-    since_onset,
-    sign_latch,
-)
-from servotau.errors import IdentificationError  # noqa: E402
 
 STARTS = (0, 3)
 

@@ -62,6 +62,6 @@ def combine(datasets: Sequence[Dataset]) -> Dataset:
     notes = [f"{len(datasets)} recordings, one segment each (held out: leave-one-recording-out): "
              + ", ".join(f"{i}={d.source}" for i, d in enumerate(datasets))]
     notes += [f"{d.source}: {x}" for d in datasets for x in d.notes]
-    return Dataset(Signals(cols, first.dt, n, starts=starts), np.concatenate([d.target for d in datasets]), segment, first.roles,
-                   " + ".join(d.source for d in datasets), first.joint, sum(d.n_dropped for d in datasets),
+    return Dataset(Signals(cols, first.dt, n, starts=starts), np.concatenate([d.target for d in datasets]), segment,
+                   first.roles, " + ".join(d.source for d in datasets), first.joint, sum(d.n_dropped for d in datasets),
                    tuple(notes))
