@@ -11,17 +11,19 @@ at its mean velocity ``v[k] = (dq[k-1] + dq[k]) / 2`` (trapezoid; ``dq[-1] = dq[
 ``z_r`` at the reversal ``x_r``). The batch evaluation runs the linear time-varying recursion as a prefix scan
 of the affine maps ``z -> a z + b`` (``log2 n`` vectorised passes, no per-sample loop); the on-line class runs
 the same step one sample at a time. The path is integrated from the velocity signal, not from the encoder's
-``q``: a quantised encoder's steps at rest would reverse the state at every count.
+``q``: a quantised encoder's steps at rest would reverse the state at every count. At the first sample of each run
+of the log (:attr:`~servotau.actuator.signals.Signals.starts`) the state restarts from ``z = 0`` with
+``dq[-1] = dq[start]``, as at the log's first sample.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .signals import Signals
+from .signals import Signals, run_bounds
 
 FRICTION_COEFFICIENT = (0.0, float("inf"))
 """Friction opposes the motion: its coefficient ``k_tau F >= 0`` (a negative one would push the joint along)."""
@@ -61,14 +63,19 @@ def step(dq: float, dt: float, x0: float, gain: float = 1.0) -> tuple[float, flo
 def state(s: Signals, what: str, x0: float, gain: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
     """The state ``z`` of every sample of ``s`` (``gain(dq)``: the steady state's magnitude, default 1)."""
     dt = s.require_dt(what)
-    v = mean_velocity(s["dq"])
+    v = mean_velocity(s["dq"], s.starts)
     a, b = steps(v, dt, x0, 1.0 if gain is None else gain(v))
+    a[list(s.starts[1:])] = 0.0  # z[start - 1] is not this run's: the state restarts from 0
     return affine_scan(a, b)
 
 
-def mean_velocity(dq: np.ndarray) -> np.ndarray:
-    """``(dq[k-1] + dq[k]) / 2`` [rad/s], the mean velocity of each tick (``dq[-1] = dq[0]``)."""
-    return 0.5 * (dq + np.concatenate([dq[:1], dq[:-1]]))
+def mean_velocity(dq: np.ndarray, starts: Sequence[int] | None = None) -> np.ndarray:
+    """``(dq[k-1] + dq[k]) / 2`` [rad/s], the mean velocity of each tick (``dq[-1] = dq[0]``, and likewise at
+    each of ``starts``)."""
+    prev = np.concatenate([dq[:1], dq[:-1]])
+    if starts is not None and len(starts) > 1:
+        prev[list(starts)] = dq[list(starts)]
+    return 0.5 * (dq + prev)
 
 
 class OnlineState:
@@ -93,11 +100,19 @@ class OnlineState:
         self.dq = x["dq"]
 
 
-def strokes(dq: np.ndarray, dt: float) -> np.ndarray:
-    """Travel [rad] between reversals of the motion (sign changes of ``dq`` beyond 5 % of its 95 % quantile)."""
+def strokes(dq: np.ndarray, dt: float, starts: Sequence[int] | None = None) -> np.ndarray:
+    """Travel [rad] between reversals of the motion (sign changes of ``dq`` beyond 5 % of its 95 % quantile of
+    the whole log), within each run (a stroke ends with its run)."""
     v = np.quantile(np.abs(dq), 0.95) if len(dq) else 0.0
     if not v > 0:
         return np.zeros(0)
+    bounds = run_bounds(len(dq), starts)
+    if len(bounds) > 1:
+        return np.concatenate([_strokes(dq[a:b], dt, v) for a, b in bounds])
+    return _strokes(dq, dt, v)
+
+
+def _strokes(dq: np.ndarray, dt: float, v: float) -> np.ndarray:
     sign = np.where(dq > 0.05 * v, 1, np.where(dq < -0.05 * v, -1, 0))
     idx = np.flatnonzero(sign)
     if idx.size < 2:
@@ -118,7 +133,7 @@ def x0_grid(s: Signals, max_shapes: int = X0_MAX_SHAPES) -> tuple[float, ...]:
     speed = np.abs(dq)
     moving = speed[speed > 0.05 * np.quantile(speed, 0.95)] if len(speed) else speed
     lo = float(np.median(moving)) * s.dt if moving.size else 0.0
-    st = strokes(dq, s.dt)
+    st = strokes(dq, s.dt, s.starts)
     hi = 0.5 * float(np.median(st)) if st.size else 0.0
     if not (lo > 0 and math.isfinite(lo)):
         return X0_DEFAULT

@@ -12,12 +12,19 @@ An effect is a function of :class:`Signals`, a read-only mapping from signal nam
 Filters with memory (delays, first-order lags, the direction latch, the limit detector with hysteresis) are
 written as one-step recursions, evaluated here over a whole array and by
 :mod:`~servotau.actuator.online` one sample at a time, so both give the same numbers.
+
+Runs: a log can hold several stretches of consecutive samples (recordings joined end to end, a gap in the time
+stamps, dropped rows): :attr:`Signals.starts` gives the first sample of each. Every filter that reads the past
+(or, centred, the future) restarts at each start: its state is reset as at the first sample of a log, and no
+sample of another run is read. The centred acceleration fits its polynomial to the run's first (last) full
+window at the run's edges, as at a log's ends (one-sided, no delay): a log of several runs gives the same columns
+as each run processed alone and concatenated, and no row is dropped or down-weighted.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 from scipy.signal import lfilter
@@ -34,6 +41,9 @@ class Signals(Mapping[str, np.ndarray]):
     Entries can be given lazily as zero-argument callables; they are computed on first access.
     Filtered versions of a signal (:meth:`derived`) are computed once for this object and the copies
     :meth:`with_columns` makes of it, as long as they hold the same array.
+
+    ``starts``: the first sample of each run of consecutive samples (default: one run, ``(0,)``); filters with
+    memory restart there (module doc).
     """
 
     def __init__(
@@ -43,10 +53,12 @@ class Signals(Mapping[str, np.ndarray]):
         n: int,
         *,
         memo: dict | None = None,
+        starts: Sequence[int] | None = None,
     ):
         self._cols = dict(columns)
         self.dt = dt
         self.n = int(n)
+        self.starts = check_starts(starts, self.n)
         self._memo = {} if memo is None else memo  # (source, key) -> (source array, derived array)
 
     def __getitem__(self, name: str) -> np.ndarray:
@@ -69,7 +81,11 @@ class Signals(Mapping[str, np.ndarray]):
 
     def with_columns(self, **columns: np.ndarray | Callable[[], np.ndarray]) -> Signals:
         """A copy with ``columns`` added or replaced (e.g. ``u`` of another model)."""
-        return Signals({**self._cols, **columns}, self.dt, self.n, memo=self._memo)
+        return Signals({**self._cols, **columns}, self.dt, self.n, memo=self._memo, starts=self.starts)
+
+    def runs(self) -> list[tuple[int, int]]:
+        """``[start, stop)`` of each run of consecutive samples (:attr:`starts`)."""
+        return run_bounds(self.n, self.starts)
 
     def derived(self, source: str, key: tuple, compute: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
         """``compute(self[source])`` (read-only), computed once per ``key`` (what the computation is, e.g.
@@ -91,13 +107,43 @@ class Signals(Mapping[str, np.ndarray]):
         return self.dt
 
 
+def check_starts(starts: Sequence[int] | None, n: int) -> tuple[int, ...]:
+    """``starts`` as a tuple (``(0,)`` for None), checked: integers, strictly increasing, from 0, below ``n``."""
+    if starts is None:
+        return (0,)
+    out = tuple(int(k) for k in starts)
+    if not out or out[0] != 0 or any(b <= a for a, b in zip(out, out[1:], strict=False)) or (n > 0 and out[-1] >= n):
+        raise IdentificationError(f"starts = {list(starts)[:8]}: expected strictly increasing sample indices "
+                                  f"from 0, below the {n} samples")
+    return out
+
+
+def run_bounds(n: int, starts: Sequence[int] | None) -> list[tuple[int, int]]:
+    """``[start, stop)`` of the runs of ``n`` samples that begin at ``starts`` (None: one run)."""
+    if starts is None or len(starts) <= 1:
+        return [(0, n)]
+    edges = [*starts, n]
+    return list(zip(edges[:-1], edges[1:], strict=False))
+
+
+def per_run(f: Callable[..., np.ndarray], starts: Sequence[int] | None, *xs: np.ndarray) -> np.ndarray:
+    """``f`` applied to the slices of ``xs`` of each run, concatenated (``f(*xs)`` itself for one run): the filter
+    restarts at every start and reads no sample of another run."""
+    bounds = run_bounds(len(xs[0]), starts)
+    if len(bounds) == 1:
+        return f(*xs)
+    return np.concatenate([f(*(x[a:b] for x in xs)) for a, b in bounds])
+
+
 def ticks(seconds: float, dt: float) -> int:
     """``seconds`` as a whole number of samples (at least 1)."""
     return max(1, int(round(seconds / dt)))
 
 
-def delayed(x: np.ndarray, n: int) -> np.ndarray:
-    """``x`` delayed by ``n`` samples, the first value repeated before the start."""
+def delayed(x: np.ndarray, n: int, starts: Sequence[int] | None = None) -> np.ndarray:
+    """``x`` delayed by ``n`` samples, the first value of each run repeated before its start."""
+    if starts is not None and len(starts) > 1:
+        return per_run(lambda v: delayed(v, n), starts, x)
     if n <= 0:
         return x.copy()
     if n >= len(x):
@@ -110,21 +156,27 @@ def lowpass_gain(time_constant: float, dt: float) -> float:
     return dt / (time_constant + dt)
 
 
-def lowpass(x: np.ndarray, time_constant: float, dt: float, y0: float | None = None) -> np.ndarray:
-    """First-order lag ``y[k] = y[k-1] + a (x[k] - y[k-1])`` with ``y[-1] = y0`` (default ``x[0]``)."""
+def lowpass(x: np.ndarray, time_constant: float, dt: float, y0: float | None = None,
+            starts: Sequence[int] | None = None) -> np.ndarray:
+    """First-order lag ``y[k] = y[k-1] + a (x[k] - y[k-1])`` with ``y[-1] = y0`` (default ``x[0]``), restarted
+    the same way at each run's start."""
+    if starts is not None and len(starts) > 1:
+        return per_run(lambda v: lowpass(v, time_constant, dt, y0), starts, x)
     a = lowpass_gain(time_constant, dt)
     y0 = float(x[0]) if y0 is None else y0
     y, _ = lfilter([a], [1.0, -(1.0 - a)], x, zi=[(1.0 - a) * y0])
     return y
 
 
-def direction_latch(dq: np.ndarray, threshold: float) -> np.ndarray:
-    """Sign of the last velocity with ``|dq| > threshold`` [rad/s] (0 before any motion)."""
-    return sign_latch(dq, np.abs(dq) > threshold)
+def direction_latch(dq: np.ndarray, threshold: float, starts: Sequence[int] | None = None) -> np.ndarray:
+    """Sign of the last velocity with ``|dq| > threshold`` [rad/s] (0 before any motion of the run)."""
+    return sign_latch(dq, np.abs(dq) > threshold, starts)
 
 
-def sign_latch(x: np.ndarray, flag: np.ndarray) -> np.ndarray:
-    """Sign of ``x`` at the last sample where ``flag`` is True (0 before the first)."""
+def sign_latch(x: np.ndarray, flag: np.ndarray, starts: Sequence[int] | None = None) -> np.ndarray:
+    """Sign of ``x`` at the last sample of the run where ``flag`` is True (0 before the run's first)."""
+    if starts is not None and len(starts) > 1:
+        return per_run(sign_latch, starts, x, flag)
     idx = np.where(flag, np.arange(len(x)), -1)
     np.maximum.accumulate(idx, out=idx)
     out = np.sign(x[np.maximum(idx, 0)])
@@ -132,33 +184,37 @@ def sign_latch(x: np.ndarray, flag: np.ndarray) -> np.ndarray:
     return out
 
 
-def run_onsets(flag: np.ndarray) -> np.ndarray:
+def run_onsets(flag: np.ndarray, starts: Sequence[int] | None = None) -> np.ndarray:
     """Index of the first sample of the run of ``True`` each sample belongs to (-1 before the first run;
-    meaningful where ``flag`` is True)."""
+    meaningful where ``flag`` is True); a run of ``True`` also begins at each of ``starts``."""
     idx = np.arange(len(flag))
     start = flag & ~np.concatenate([[False], flag[:-1]])
+    if starts is not None and len(starts) > 1:
+        start[list(starts)] = flag[list(starts)]
     out = np.where(start, idx, -1)
     np.maximum.accumulate(out, out=out)
     return out
 
 
-def since_onset(x: np.ndarray, flag: np.ndarray) -> np.ndarray:
-    """``x - x[onset]`` where ``flag`` is True, ``onset`` the first sample of the run it belongs to; 0 elsewhere."""
-    return np.where(flag, x - x[np.maximum(run_onsets(flag), 0)], 0.0)
+def since_onset(x: np.ndarray, flag: np.ndarray, starts: Sequence[int] | None = None) -> np.ndarray:
+    """``x - x[onset]`` where ``flag`` is True, ``onset`` the first sample of the run it belongs to (a run of
+    ``True`` restarts at each of ``starts``); 0 elsewhere."""
+    return np.where(flag, x - x[np.maximum(run_onsets(flag, starts), 0)], 0.0)
 
 
-def hysteresis(x: np.ndarray, on: float, off: float) -> np.ndarray:
+def hysteresis(x: np.ndarray, on: float, off: float, starts: Sequence[int] | None = None) -> np.ndarray:
     """A detector with hysteresis: True from the first ``x > on`` until ``x <= off`` (``off <= on``).
 
     One-step recursion ``s[k] = x[k] > (off if s[k-1] else on)``, written over the whole array: a sample
-    is on if ``x > off`` and some sample of the same run of ``x > off`` reached ``on`` before it (or at it).
+    is on if ``x > off`` and some sample of the same run of ``x > off`` reached ``on`` before it (or at it);
+    the detector starts off at each of ``starts``.
     """
     if off > on:
         raise IdentificationError(f"hysteresis: off = {off!r} > on = {on!r}: expected off <= on")
     above_off = x > off
     idx = np.arange(len(x))
     last_on = np.maximum.accumulate(np.where(x > on, idx, -1))
-    return above_off & (last_on >= run_onsets(above_off)) & (last_on >= 0)
+    return above_off & (last_on >= run_onsets(above_off, starts)) & (last_on >= 0)
 
 
 # -- helpers shared by several effects -----------------------------------------------------------------
@@ -178,8 +234,9 @@ def smooth_sign_scalar(x: float, v: float) -> float:
 
 def command_lead(s: Signals) -> np.ndarray:
     """``q_des(t - 1 tick) - q(t)`` [rad]: the error the servo has to close at the start of the tick, up to
-    the previous command (the integral of ``dq_des - dq``; this tick's command is not read)."""
-    return delayed(s["q_des"], 1) - s["q"]
+    the previous command (the integral of ``dq_des - dq``; this tick's command is not read). At a run's first
+    sample, that sample's command."""
+    return delayed(s["q_des"], 1, s.starts) - s["q"]
 
 
 def sample_lead(x: Mapping[str, float], q_des_prev: float | None) -> float:
@@ -190,7 +247,8 @@ def sample_lead(x: Mapping[str, float], q_des_prev: float | None) -> float:
 def acceleration(s: Signals, window: float) -> np.ndarray:
     """The acceleration [rad/s^2]: an estimate given with the data (``ddq_est``: an acceleration column of
     the log, or the controller's estimator on-line), else the centred SG second derivative of ``q`` over
-    ``window`` [s] (order 3)."""
+    ``window`` [s] (order 3), fitted on each run (one-sided at its edges, module doc; a run shorter than the
+    window takes ``ddq``, the data's own derivative of that run)."""
     if "ddq_est" in s:
         return s["ddq_est"]
     if window <= 0.0:
@@ -199,7 +257,19 @@ def acceleration(s: Signals, window: float) -> np.ndarray:
     w = max(5, int(round(window / dt)) | 1)
     if w > s.n:
         return s["ddq"]
-    return s.derived("q", ("ddq", w, dt), lambda q: savgol_centred(q, w, 3, dt, deriv=2))
+    short = any(b - a < w for a, b in s.runs())
+    ddq = s["ddq"] if short and "ddq" in s else None
+
+    def second_derivative(q: np.ndarray, k: int) -> np.ndarray:
+        if len(q) >= w:
+            return savgol_centred(q, w, 3, dt, deriv=2)
+        if ddq is not None:
+            return ddq[k:k + len(q)]
+        m = len(q) if len(q) % 2 else len(q) - 1  # no ddq: the run's longest odd window, or no acceleration
+        return savgol_centred(q, m, 3, dt, deriv=2) if m >= 5 else np.zeros(len(q))
+
+    return s.derived("q", ("ddq", w, dt, s.starts), lambda q: np.concatenate(
+        [second_derivative(q[a:b], a) for a, b in s.runs()]))
 
 
 def inertia(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
@@ -212,7 +282,7 @@ def inertia(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:
     a = acceleration(s, window)
     if lag <= 0.0:
         return a
-    return delayed(a, ticks(lag, s.require_dt("the lag of the inertia term")))
+    return delayed(a, ticks(lag, s.require_dt("the lag of the inertia term")), s.starts)
 
 
 def sample_acceleration(x: Mapping[str, float]) -> float:

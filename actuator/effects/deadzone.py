@@ -86,7 +86,7 @@ def deadzone(
     step = np.clip(m / band, -1.0, 1.0)
     if v_th <= 0.0:
         return step
-    rest = direction_latch(m, band) * np.exp(-((s["dq"] / v_th) ** 2))
+    rest = direction_latch(m, band, s.starts) * np.exp(-((s["dq"] / v_th) ** 2))
     return step + (1.0 - np.abs(step)) * rest
 
 
@@ -94,10 +94,10 @@ def _crossing(s: Signals, band: float, damping_share: float) -> tuple[np.ndarray
     """The two columns of the crossing form: the edge (``sign(m)`` outside the band, inside the sign of the
     last effort outside) and the command's lead since the entry into the band [rad] (0 outside)."""
     m = s["u"] - damping_share * s["u_v"]
-    outside = hysteresis(np.abs(m), DZ_RELEASE * band, band)
+    outside = hysteresis(np.abs(m), DZ_RELEASE * band, band, s.starts)
     inside = ~outside
-    edge = np.where(inside, sign_latch(m, outside), np.sign(m))
-    return edge, since_onset(command_lead(s), inside)
+    edge = np.where(inside, sign_latch(m, outside, s.starts), np.sign(m))
+    return edge, since_onset(command_lead(s), inside, s.starts)
 
 
 def columns(

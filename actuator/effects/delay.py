@@ -22,7 +22,7 @@ GRID = ResolvedGrid(SHAPES, ("delay",))  # the delays the sample period resolves
 
 def delay(s: Signals, delay: float) -> np.ndarray:
     q_des = s["q_des"]
-    return q_des - delayed(q_des, ticks(delay, s.require_dt("delay")))
+    return q_des - delayed(q_des, ticks(delay, s.require_dt("delay")), s.starts)
 
 
 class DelayOnline:

@@ -20,7 +20,7 @@ GRID = ResolvedGrid(SHAPES, ("time_constant",))  # the time constants the sample
 
 def motor_lag(s: Signals, time_constant: float) -> np.ndarray:
     u = s["u"]
-    return lowpass(u, time_constant, s.require_dt("motor_lag")) - u
+    return lowpass(u, time_constant, s.require_dt("motor_lag"), starts=s.starts) - u
 
 
 class MotorLagOnline(OnlineLag):

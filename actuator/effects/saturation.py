@@ -51,8 +51,8 @@ def saturation(s: Signals, tau_sat: float, beta: float, release: float = 0.8) ->
     error since the onset: the term resets the model to the error it measured when the limit was reached
     (output-error form).
     """
-    flag = hysteresis(np.abs(motor_torque_proxy(s, beta)), tau_sat, release * tau_sat)
-    return since_onset(command_lead(s), flag)
+    flag = hysteresis(np.abs(motor_torque_proxy(s, beta)), tau_sat, release * tau_sat, s.starts)
+    return since_onset(command_lead(s), flag, s.starts)
 
 
 def grid(s: Signals) -> tuple[dict[str, float], ...]:

@@ -21,7 +21,7 @@ GRID = tuple({"v_th": v} for v in (0.005, 0.01, 0.02, 0.05))
 
 def stiction(s: Signals, v_th: float) -> np.ndarray:
     dq = s["dq"]
-    return direction_latch(dq, v_th) * np.exp(-((dq / v_th) ** 2))
+    return direction_latch(dq, v_th, s.starts) * np.exp(-((dq / v_th) ** 2))
 
 
 class StictionOnline:

@@ -28,7 +28,7 @@ drift: fitted on simulated logs with a current limit and no drift, the slope wou
 
 def thermal_drift(s: Signals, tau_th: float) -> np.ndarray:
     dt = s.require_dt("thermal_drift")
-    heat = lowpass((s["u"] / U_REF) ** 2, tau_th, dt, y0=0.0)
+    heat = lowpass((s["u"] / U_REF) ** 2, tau_th, dt, y0=0.0, starts=s.starts)
     return heat * s["dq"]
 
 

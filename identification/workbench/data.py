@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from servotau.actuator.excitation import JITTER_TOL, period_jitter, unit_doubts
-from servotau.actuator.signals import Signals
+from servotau.actuator.signals import Signals, per_run
 from servotau.errors import IdentificationError
 
 from ..data import read_table, resolve_roles, segments, shift, table_columns
@@ -258,7 +258,9 @@ def load_dataset(
     for doubt in unit_doubts(sig.get("q"), target if "command" in roles else None, sig.get("tau_raw", sig.get("tau"))):
         notes.append(f"units: {doubt}")
         log.warning("%s: %s", name, doubt)
-    return Dataset(Signals(sig, dt, n), target, segment, roles, name, joint, n_dropped, tuple(notes), prep)
+    starts = np.searchsorted(np.flatnonzero(valid), [a for a, _ in runs])  # the runs, in rows kept
+    return Dataset(Signals(sig, dt, n, starts=starts), target, segment, roles, name, joint, n_dropped, tuple(notes),
+                   prep)
 
 
 def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] | None:
@@ -272,8 +274,7 @@ def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] |
     w = max(FAST_MIN_WINDOW, int(round(factor * info["window"])) | 1)
     if w >= info["window"]:
         return None
-    t = ds.signals["t"] if "t" in ds.signals else None
-    runs = segments(t, ds.dt, valid=np.ones(ds.n, dtype=bool), max_gap=RUN_GAP)
+    runs = ds.signals.runs()
     q = ds.signals["q"]
     cols = {"dq": _differentiate(q, runs, ds.dt, 1, w)}
     if "ddq_est" not in ds.signals:
@@ -455,7 +456,8 @@ def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float
     there), the servo error follows the torque, ``d(dq_err)/dt ~ k_tau dtau/dt``, whatever the servo does
     with a moving command (delay, lag). The shift ``s`` (whole samples in ``[-max_shift_s, max_shift_s]``)
     that best correlates the two derivatives there is applied: ``tau(t + s)``, ``s > 0`` meaning the
-    torque column was late. Without such holds nothing is shifted. Samples at the ends hold the last value.
+    torque column was late. Without such holds nothing is shifted. Samples at the ends of each run hold its
+    last value (no torque of another run is read).
     """
     if not ds.has_torque or ds.dt is None or max_shift_s <= 0 or "q_des" not in ds.signals:
         return ds, 0.0
@@ -476,7 +478,7 @@ def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float
             best, best_c = k, c
     if best == 0:
         return ds, 0.0
-    sig = ds.signals.with_columns(tau=shift(tau, best, fill="hold"))
+    sig = ds.signals.with_columns(tau=per_run(lambda x: shift(x, best, fill="hold"), ds.signals.starts, tau))
     note = f"tau: advanced by {best * ds.dt * 1e3:.0f} ms to match the encoders (estimator delay)"
     out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note),
                   ds.preprocessing)

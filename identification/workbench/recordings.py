@@ -2,7 +2,9 @@
 
 Each recording is read and preprocessed on its own (:func:`~.data.load_dataset`); :func:`combine` joins them:
 the signals they all have, end to end (time continued one sample period after the previous recording's
-end), ``segment`` = the recording's index (0, 1, ...), the cross-validation's blocks.
+end), ``segment`` = the recording's index (0, 1, ...), the cross-validation's blocks. Each recording's runs
+(:attr:`~servotau.actuator.signals.Signals.starts`: its first sample, and any gap inside it) stay runs of the
+joined signals, so the effects' filters restart at every join and never read another recording's samples.
 """
 
 from __future__ import annotations
@@ -55,9 +57,11 @@ def combine(datasets: Sequence[Dataset]) -> Dataset:
         cols[k] = np.concatenate(parts)
     n = sum(d.n for d in datasets)
     segment = np.concatenate([np.full(d.n, float(i)) for i, d in enumerate(datasets)])
+    offsets = np.cumsum([0] + [d.n for d in datasets[:-1]])
+    starts = [o + k for o, d in zip(offsets, datasets, strict=True) for k in d.signals.starts]
     notes = [f"{len(datasets)} recordings, one segment each (held out: leave-one-recording-out): "
              + ", ".join(f"{i}={d.source}" for i, d in enumerate(datasets))]
     notes += [f"{d.source}: {x}" for d in datasets for x in d.notes]
-    return Dataset(Signals(cols, first.dt, n), np.concatenate([d.target for d in datasets]), segment, first.roles,
-                   " + ".join(d.source for d in datasets), first.joint, sum(d.n_dropped for d in datasets),
+    return Dataset(Signals(cols, first.dt, n, starts=starts), np.concatenate([d.target for d in datasets]), segment,
+                   first.roles, " + ".join(d.source for d in datasets), first.joint, sum(d.n_dropped for d in datasets),
                    tuple(notes))

@@ -1,0 +1,90 @@
+"""Recordings joined end to end (recordings.combine) and logs with gaps: every effect's columns restart at each
+run, so a joined log gives the same columns as its recordings processed alone and concatenated."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from servotau.actuator import builtin_effects
+from servotau.identification.workbench import load_dataset
+from servotau.identification.workbench.recordings import combine
+
+DT = 2e-3  # [s]
+
+
+def _log(seed: int, n: int, t0: float = 0.0) -> dict[str, np.ndarray]:
+    """A servo log: a random smooth command, the joint following it with an error that grows with the torque."""
+    rng = np.random.default_rng(seed)
+    t = t0 + np.arange(n) * DT
+    f = rng.uniform(0.3, 1.5, 3)
+    q_des = sum(rng.uniform(0.1, 0.4) * np.sin(2 * np.pi * fk * t + rng.uniform(0, 6)) for fk in f)
+    tau = 20.0 * np.gradient(np.gradient(q_des, DT), DT) * 0.05 + 3.0 * np.sin(q_des)
+    q = q_des - 1e-3 * tau - 2e-3 * np.gradient(q_des, DT) + rng.normal(0, 2e-5, n)
+    return {"t": t, "q": q, "q_des": q_des, "tau": tau + rng.normal(0, 0.05, n)}
+
+
+def _columns(ds, shapes=None):
+    """Every builtin effect's columns on ``ds`` (``u`` = the target), at ``shapes`` (default: its grid on ``ds``)."""
+    sig = ds.signals.with_columns(u=ds.target.copy(), u_v=np.zeros(ds.n), u_tau=ds.target.copy())
+    out, grids = {}, {}
+    for eff in builtin_effects():
+        grid = shapes[eff.name] if shapes is not None else eff.grid_for(sig)
+        grids[eff.name] = grid
+        for shape in grid:
+            out[(eff.name, tuple(sorted(shape.items())))] = eff.columns(sig, shape)
+    return out, grids
+
+
+def test_a_joined_log_gives_the_columns_of_its_recordings_processed_alone():
+    """Two recordings at the same period: each effect (every shape of the joined log's grid) on the joined log is
+    its columns on each recording, concatenated; without the runs, the join shows (the delay, the acceleration)."""
+    parts = [load_dataset(_log(seed, n)) for seed, n in ((1, 1500), (2, 1100))]
+    ds = combine(parts)
+    assert ds.signals.starts == (0, 1500)
+    joined, grids = _columns(ds)
+    alone = [_columns(p, grids)[0] for p in parts]
+    for key, col in joined.items():
+        np.testing.assert_allclose(col, np.concatenate([a[key] for a in alone]), rtol=1e-9, atol=1e-12,
+                                   err_msg=str(key))
+    crossed = ds.signals.__class__(dict(ds.signals), ds.dt, ds.n)  # the same columns as one run
+    delay = next(e for e in builtin_effects() if e.name == "delay")
+    shape = grids["delay"][-1]
+    assert np.max(np.abs(delay.columns(crossed, shape)[1500])) > 10 * np.max(np.abs(joined[
+        ("delay", tuple(sorted(shape.items())))][1500]))
+
+
+def test_combine_keeps_each_recordings_runs_and_load_dataset_hands_its_gaps_to_the_signals():
+    a = _log(3, 900)
+    keep = np.ones(900, dtype=bool)
+    keep[400:410] = False  # a gap of 10 samples: a second run
+    gap = load_dataset({k: v[keep] for k, v in a.items()})
+    assert gap.signals.starts == (0, 400)
+    nan = dict(a)
+    nan["tau"] = a["tau"].copy()
+    nan["tau"][600] = np.nan  # a dropped row ends a run too
+    dropped = load_dataset(nan)
+    assert dropped.n_dropped == 1 and dropped.signals.starts == (0, 600)
+    ds = combine([gap, load_dataset(_log(4, 700)), dropped])
+    assert ds.signals.starts == (0, 400, 890, 1590, 2190)
+    assert ds.signals.with_columns(u=np.zeros(ds.n)).runs()[-1] == (2190, ds.n)
+    one = load_dataset(a)
+    assert one.signals.starts == (0,)
+
+
+@pytest.mark.parametrize("effect", ["delay", "motor_lag", "dahl", "saturation"])
+def test_a_gap_in_one_log_restarts_the_effects_filters(effect):
+    """A log with a gap gives, on each side of it, the columns of that side alone (at the same shapes; the same
+    preprocessing windows, which each side alone would choose from its own samples)."""
+    a = _log(5, 1200)
+    keep = np.ones(1200, dtype=bool)
+    keep[500:520] = False
+    opts = {"dq_window": 9, "smooth_torque_s": 0.014}
+    ds = load_dataset({k: v[keep] for k, v in a.items()}, **opts)
+    left = load_dataset({k: v[:500] for k, v in a.items()}, **opts)
+    right = load_dataset({k: v[520:] for k, v in a.items()}, **opts)
+    eff = next(e for e in builtin_effects() if e.name == effect)
+    sig = ds.signals.with_columns(u=ds.target.copy())
+    for shape in eff.grid_for(sig):
+        parts = [eff.columns(p.signals.with_columns(u=p.target.copy()), shape) for p in (left, right)]
+        np.testing.assert_allclose(eff.columns(sig, shape), np.concatenate(parts), rtol=1e-9, atol=1e-12)
