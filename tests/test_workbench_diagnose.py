@@ -224,3 +224,20 @@ def test_saturation_coefficient_is_between_half_and_one_and_a_half():
         assert abs(d.top.coefficient - 0.8) < 0.1, d.top.coefficient
     finally:
         unregister_effect("saturation_free")
+
+
+def test_runner_up_is_another_effect_when_the_first_ranked_fails_in_too_many_blocks():
+    """The named effect is the best consistent one; the runner-up shown is the best other effect, never itself."""
+    from dataclasses import replace
+
+    from servotau.identification.workbench import resolve_shapes
+    from servotau.identification.workbench.verdict import verdict_of
+
+    ds = load_dataset(synthetic_table(cogging_truth))
+    d = diagnose(ds, parse_spec("coulomb", ds.signals))
+    spec = resolve_shapes(ds.signals, ds.target, parse_spec("coulomb", ds.signals), Loss(), {})  # as diagnose does
+    tested = [c for c in d.ranking if c.testable]
+    first = replace(tested[1], heldout_gain=0.9, consistent=False)  # better, but fails in too many blocks
+    again = verdict_of(ds, spec, d.base, [first, tested[0], *tested[2:]], d.probes, d.excitation, d.min_gain)
+    assert again.message.startswith(f"missing effect: {tested[0].effect}"), again.message
+    assert f"runner-up {first.effect} (90 %)" in again.message, again.message

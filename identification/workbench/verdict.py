@@ -249,8 +249,8 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
     if named:
         top = named[0]
         verdict = "missing_effect"
-        tested = [c for c in ranking if c.testable]
-        second = tested[1] if len(tested) > 1 else None
+        # the best other tested effect (the named one is not first when a better one failed in too many blocks)
+        second = next((c for c in ranking if c.testable and c.effect != top.effect), None)
         eff = get_effect(top.effect)
         for other in eff.confusable:
             key = frozenset((top.effect, other))
