@@ -241,3 +241,4 @@ def test_runner_up_is_another_effect_when_the_first_ranked_fails_in_too_many_blo
     again = verdict_of(ds, spec, d.base, [first, tested[0], *tested[2:]], d.probes, d.excitation, d.min_gain)
     assert again.message.startswith(f"missing effect: {tested[0].effect}"), again.message
     assert f"runner-up {first.effect} (90 %)" in again.message, again.message
+    assert again.top is tested[0] and again.runner_up is first  # what the ladder adds is what the message names

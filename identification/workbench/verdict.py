@@ -150,12 +150,17 @@ class Diagnosis:
 
     @property
     def top(self) -> Candidate | None:
+        """The named effect (the best testable one that clears ``min_gain`` in enough blocks), else the best
+        testable one if it is first in the ranking."""
+        named = next((c for c in self.ranking if _nameable(c, self.min_gain)), None)
+        if named is not None:
+            return named
         return self.ranking[0] if self.ranking and self.ranking[0].testable else None
 
     @property
     def runner_up(self) -> Candidate | None:
-        tested = [c for c in self.ranking if c.testable]
-        return tested[1] if len(tested) > 1 else None
+        top = self.top
+        return next((c for c in self.ranking if c.testable and c is not top), None)
 
     def candidate(self, effect: str) -> Candidate:
         for c in self.ranking:
@@ -189,6 +194,11 @@ class Diagnosis:
         }
 
 
+def _nameable(c: Candidate, min_gain: float) -> bool:
+    """The verdict may name ``c``: testable, removes ``min_gain`` of the held-out error, helps in enough blocks."""
+    return c.testable and c.heldout_gain >= min_gain and c.consistent
+
+
 def _r(x: float) -> float | None:
     return None if x is None or not math.isfinite(x) else float(f"{x:.6g}")
 
@@ -212,7 +222,7 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
     and a sentence per probe that fell below the threshold. Unchanged when an effect is named, no such probe
     reaches ``PROBE_FACTOR * min_gain`` or the velocity is the log's own."""
     out = dict(probes)
-    if any(c.testable and c.heldout_gain >= min_gain and c.consistent for c in ranking):
+    if any(_nameable(c, min_gain) for c in ranking):
         return out, ()
     todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
     fast = faster_derivative(ds) if todo else None
@@ -243,7 +253,7 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
 
 
 def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str, ...] = ()) -> Diagnosis:
-    named = [c for c in ranking if c.testable and c.heldout_gain >= min_gain and c.consistent]
+    named = [c for c in ranking if _nameable(c, min_gain)]
     experiments = {}
     confusion = None
     if named:
