@@ -69,15 +69,18 @@ def diagnose_log(log: dict) -> dict:
 
 
 def oracle_of(log: dict, t_true, residuals: dict) -> dict:
-    """``oracle_gain`` per hidden effect and ``oracle_gain_all`` (every hidden effect at once) of one log."""
+    """``oracle_gain`` per hidden effect and ``oracle_gain_all`` (every hidden effect at once) of one log; for a
+    pair, ``oracle_gain_alone``: each effect's gain from its own column only (without the interaction)."""
     from servotau.identification.workbench import load_dataset
 
     try:
         ds = load_dataset(dict(log))
         gains = {e: round(float(oracle_gain(ds, t_true, rs)), 4) for e, rs in residuals.items()}
+        alone = {e: round(float(oracle_gain(ds, t_true, rs[:1])), 4) for e, rs in residuals.items() if len(rs) > 1}
     except Exception as exc:  # a crash is a result, recorded
         return {"oracle_error": f"{type(exc).__name__}: {exc}"[:200]}
-    return {"oracle_gain": {e: g for e, g in gains.items() if e != "all"}, "oracle_gain_all": gains["all"]}
+    out = {"oracle_gain": {e: g for e, g in gains.items() if e != "all"}, "oracle_gain_all": gains["all"]}
+    return {**out, "oracle_gain_alone": alone} if alone else out
 
 
 def row_of(truth: dict, result: dict, split: int = SPLIT) -> dict:
@@ -180,7 +183,8 @@ def detectable(rows: list[dict], min_gain: float) -> dict:
             c["named"] += named
             if not top2:
                 misses.append({"seed": r["seed"], "period_ms": r["period_ms"], "hidden": r["hidden"], "effect": e,
-                               "oracle_gain": g, "verdict": r["verdict"], "ranked": r["ranked"], "gains": r["gains"]})
+                               "oracle_gain": g, "oracle_gain_alone": r.get("oracle_gain_alone", {}).get(e),
+                               "verdict": r["verdict"], "ranked": r["ranked"], "gains": r["gains"]})
     total = Counter()
     for c in per.values():
         total.update(c)
