@@ -5,7 +5,10 @@ no simrobot, no workbench code), each clean or with one or two hidden effects, s
 runs the workbench's diagnosis (``servotau model diagnose``, paper base) on each log. Prints ONE JSON object:
 per-effect hit rates (hidden effect ranked first / first or second), the false-alarm rate on clean logs, per part
 (tuning: seeds 0 .. n/2 - 1; held-out: n/2 .. n - 1) and per sample-period band, the confusion matrix, seconds.
-Progress on stderr.
+Each part's ``detectable`` section repeats the scores on the hidden effects an oracle could detect (the exact error
+the effect adds, from the plant's true signals, removes at least the workbench's MIN_GAIN of the paper model's
+held-out error: servotau/experiments/plant_oracle.py), counts the undetectable ones per effect and lists the
+detectable misses. Progress on stderr.
 
     python bench/workbench_family.py --json [--n 100] [--quick] [--workers 2] [--rows rows.json]
 """

@@ -8,6 +8,11 @@ Per log: the hidden effect(s) (from the side dict), the workbench's verdict and 
 - ``named``: the verdict is ``missing_effect`` and the named effect is accepted;
 - on clean logs, ``false_alarm``: the verdict is ``missing_effect`` (a missing effect is named where none is
   hidden); ``unexplained`` is counted separately;
+- per hidden effect, its *oracle gain* (:mod:`.plant_oracle`: the held-out gain over the paper model of the
+  exact error the effect adds, the most any term could remove); the effect is *detectable* on that log when it
+  reaches the workbench's materiality threshold ``MIN_GAIN``. The ``detectable`` section repeats the scores on
+  the detectable effects only, counts the undetectable ones per effect, and lists the detectable misses (not
+  ranked first or second): the workbench's own failures. The raw scores count every hidden effect;
 - everything per part (``tuning``: seeds below the split; ``held_out``: the rest, which nobody tunes on) and per
   sample-period band.
 """
@@ -18,7 +23,8 @@ import time
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
 
-from .plant_family import EFFECTS, make_family
+from .plant_family import EFFECTS, draw_plant, measure, simulate
+from .plant_oracle import effect_residuals, oracle_gain
 
 # The workbench's names that count as finding each hidden effect. The workbench has no power-law viscous term
 # yet (issue 18, item 4): any effect whose name mentions viscous or power counts.
@@ -62,32 +68,56 @@ def diagnose_log(log: dict) -> dict:
             "gains": [round(float(c.heldout_gain), 4) for c in top], "seconds": time.perf_counter() - start}
 
 
+def oracle_of(log: dict, t_true, residuals: dict) -> dict:
+    """``oracle_gain`` per hidden effect and ``oracle_gain_all`` (every hidden effect at once) of one log; for a
+    pair, ``oracle_gain_alone``: each effect's gain from its own column only (without the interaction)."""
+    from servotau.identification.workbench import load_dataset
+
+    try:
+        ds = load_dataset(dict(log))
+        gains = {e: round(float(oracle_gain(ds, t_true, rs)), 4) for e, rs in residuals.items()}
+        alone = {e: round(float(oracle_gain(ds, t_true, rs[:1])), 4) for e, rs in residuals.items() if len(rs) > 1}
+    except Exception as exc:  # a crash is a result, recorded
+        return {"oracle_error": f"{type(exc).__name__}: {exc}"[:200]}
+    out = {"oracle_gain": {e: g for e, g in gains.items() if e != "all"}, "oracle_gain_all": gains["all"]}
+    return {**out, "oracle_gain_alone": alone} if alone else out
+
+
 def row_of(truth: dict, result: dict, split: int = SPLIT) -> dict:
     return {"seed": truth["seed"], "part": part_of(truth["seed"], split), "period_ms": truth["period_ms"],
             "band": band_of(truth["period_ms"]), "hidden": list(truth["hidden"]), **result}
 
 
 def _job(item):
-    log, truth = item
-    return truth, diagnose_log(log)
+    log, truth, t_true, residuals = item
+    oracle = oracle_of(log, t_true, residuals) if truth["hidden"] else {}
+    return truth, {**diagnose_log(log), **oracle}
 
 
 def run_family(seeds, *, workers: int = 2, duration: float = 20.0, split: int = SPLIT, progress=None) -> list[dict]:
-    """Simulate the plants of ``seeds`` and diagnose each log; one row per log."""
+    """Simulate the plants of ``seeds`` and diagnose each log; one row per log, with the oracle gains of its
+    hidden effects (from the true signals, which the log does not carry)."""
     rows = []
     seeds = list(seeds)
     for b in range(0, len(seeds), 32):
-        family = make_family(seeds[b:b + 32], duration=duration, progress=progress)
+        plants = [draw_plant(s, duration=duration) for s in seeds[b:b + 32]]
+        if progress:
+            progress(f"simulating plants {plants[0].seed}..{plants[-1].seed}")
+        trues = simulate(plants, duration)
+        residuals = effect_residuals(plants, trues)
+        items = [(measure(p, tr), p.truth(), tr["t"], res) for p, tr, res in zip(plants, trues, residuals,
+                                                                                   strict=True)]
+        del trues
         if workers > 1:
             with ProcessPoolExecutor(workers) as pool:
-                results = list(pool.map(_job, family))
+                results = list(pool.map(_job, items))
         else:
-            results = [_job(item) for item in family]
+            results = [_job(item) for item in items]
         for truth, res in results:
             rows.append(row_of(truth, res, split))
             if progress:
                 progress(f"seed {truth['seed']:4d} {truth['period_ms']:2d} ms hidden {truth['hidden'] or 'none'}: "
-                         f"{res['verdict']} {res['ranked']}")
+                         f"{res['verdict']} {res['ranked']} oracle {res.get('oracle_gain', '-')}")
     return rows
 
 
@@ -119,8 +149,52 @@ def _score_rows(rows: list[dict]) -> dict:
     return {"n_logs": len(rows), "effects": effects,
             "top1": _rate(sum(c["top1"] for c in per.values()), n_eff),
             "top2": _rate(sum(c["top2"] for c in per.values()), n_eff),
+            "named": _rate(sum(c["named"] for c in per.values()), n_eff),
             "clean": {"n": clean["n"], "false_alarm": _rate(clean["false_alarm"], clean["n"]),
                       "unexplained": _rate(clean["unexplained"], clean["n"]), "errors": clean["error"]}}
+
+
+def _hits(r: dict, e: str) -> tuple[bool, bool, bool]:
+    """(top1, top2, named) of hidden effect ``e`` in row ``r``."""
+    top = r["ranked"]
+    named = top[0] if r["verdict"] == "missing_effect" and top else None
+    return bool(top) and accepted(e, top[0]), any(accepted(e, x) for x in top[:2]), accepted(e, named)
+
+
+def detectable(rows: list[dict], min_gain: float) -> dict:
+    """The scores restricted to the hidden effects whose oracle gain reaches ``min_gain``; the undetectable (and
+    unknown: no oracle gain in the row) counted per effect; the detectable misses (not in the top two)."""
+    per = defaultdict(lambda: Counter())
+    misses = []
+    for r in rows:
+        for e in r["hidden"]:
+            c = per[e]
+            g = r.get("oracle_gain", {}).get(e)
+            if g is None:
+                c["unknown"] += 1
+                continue
+            if g < min_gain:
+                c["undetectable"] += 1
+                continue
+            top1, top2, named = _hits(r, e)
+            c["n"] += 1
+            c["top1"] += top1
+            c["top2"] += top2
+            c["named"] += named
+            if not top2:
+                misses.append({"seed": r["seed"], "period_ms": r["period_ms"], "hidden": r["hidden"], "effect": e,
+                               "oracle_gain": g, "oracle_gain_alone": r.get("oracle_gain_alone", {}).get(e),
+                               "verdict": r["verdict"], "ranked": r["ranked"], "gains": r["gains"]})
+    total = Counter()
+    for c in per.values():
+        total.update(c)
+    effects = {e: {"n": c["n"], "top1": _rate(c["top1"], c["n"]), "top2": _rate(c["top2"], c["n"]),
+                   "named": _rate(c["named"], c["n"]), "undetectable": c["undetectable"], "unknown": c["unknown"]}
+               for e, c in sorted(per.items())}
+    return {"min_gain": min_gain, "n": total["n"], "top1": _rate(total["top1"], total["n"]),
+            "top2": _rate(total["top2"], total["n"]), "named": _rate(total["named"], total["n"]),
+            "undetectable": total["undetectable"], "unknown": total["unknown"], "effects": effects,
+            "misses": misses}
 
 
 def confusion(rows: list[dict]) -> dict:
@@ -133,12 +207,17 @@ def confusion(rows: list[dict]) -> dict:
     return {e: dict(sorted(c.items())) for e, c in sorted(m.items())}
 
 
-def score(rows: list[dict]) -> dict:
-    """Hit rates and false alarms per part, and per sample-period band inside each part; the confusion matrix."""
+def score(rows: list[dict], min_gain: float | None = None) -> dict:
+    """Hit rates and false alarms per part, and per sample-period band inside each part; the confusion matrix;
+    the scores on the detectable effects (oracle gain at least ``min_gain``, default the workbench's
+    ``MIN_GAIN``)."""
+    if min_gain is None:
+        from servotau.identification.workbench import MIN_GAIN as min_gain
     out = {}
     for part in ("tuning", "held_out"):
         sub = [r for r in rows if r["part"] == part]
         s = _score_rows(sub)
+        s["detectable"] = detectable(sub, min_gain)
         s["bands"] = {name: _score_rows([r for r in sub if r["band"] == name]) for _lo, _hi, name in BANDS}
         s["confusion"] = confusion(sub)
         out[part] = s

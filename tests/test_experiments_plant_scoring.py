@@ -1,0 +1,88 @@
+"""Oracle detectability of the plant family's hidden effects (plant_oracle.py) and its scores (plant_scoring.py)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from servotau.experiments import plant_family as pf
+from servotau.experiments.plant_oracle import alone, effect_residuals, oracle_gain, servo_residual
+from servotau.experiments.plant_scoring import band_of, detectable, score
+from servotau.identification.workbench import MIN_GAIN, load_dataset
+
+DUR = 2.0  # [s]
+
+
+def test_residual_is_zero_on_clean_plants():
+    plants = [pf.draw_plant(s, hidden=(), period=2e-3, duration=DUR) for s in (1, 7, 21, 64)]
+    for p, tr in zip(plants, pf.simulate(plants, DUR), strict=True):
+        assert np.std(tr["q_des"] - tr["q"]) > 1e-5  # the servo error is not trivial
+        assert np.sqrt(np.mean(servo_residual(p, tr) ** 2)) < 1e-10
+
+
+def test_residual_carries_the_delayed_command_and_the_thermal_offset():
+    plants = [pf.draw_plant(4, hidden=(e,), period=2e-3, duration=DUR) for e in ("delay", "thermal_drift")]
+    (pd, td), (pt, tt) = zip(plants, pf.simulate(plants, DUR), strict=True)
+    d = pd.effect["delay"]["d"]
+    command_shift = td["q_des"] - np.interp(td["t"] - d, td["t"], td["q_des"])
+    assert np.sqrt(np.mean((servo_residual(pd, td) - command_shift)[50:] ** 2)) < 0.05 * np.std(command_shift)
+    # the servo's gain drops with the heat H, K (1 - a H), and the logged torque carries the offset: r has both
+    drop = pt.effect["thermal_drift"]["gain_drop"] * tt["heat"]
+    gain_part = (tt["tau"] + pt.D * tt["dq"]) / pt.K * (1 / (1 - drop) - 1)
+    miss = servo_residual(pt, tt) - gain_part
+    assert np.sqrt(np.mean((miss + tt["thermal_offset"] / pt.K) ** 2)) < 0.01 * np.sqrt(np.mean(miss ** 2))
+
+
+def test_oracle_gain_is_large_for_a_big_coulomb_friction_and_small_for_a_tiny_one():
+    p = pf.draw_plant(11, hidden=("coulomb",), period=2e-3, duration=DUR)
+    big = replace(p, effect={"coulomb": {"fc": 0.1 * p.tau_scale}})
+    tiny = replace(p, effect={"coulomb": {"fc": 1e-4 * p.tau_scale}})
+    gains = []
+    for plant, tr, res in zip((big, tiny), trues := pf.simulate([big, tiny], DUR),
+                              effect_residuals([big, tiny], trues), strict=True):
+        ds = load_dataset(dict(pf.measure(plant, tr)))
+        gains.append(oracle_gain(ds, tr["t"], res["coulomb"]))
+    assert gains[0] > 0.5
+    assert gains[1] < MIN_GAIN
+
+
+def test_each_effect_of_a_pair_gets_its_own_oracle():
+    p = pf.draw_plant(11, hidden=("cogging", "coulomb"), period=2e-3, duration=DUR)
+    p = replace(p, effect={"coulomb": {"fc": 0.1 * p.tau_scale},
+                           "cogging": {"amp": 1e-4 * p.tau_scale, "period": 0.1, "phase": 0.0}})
+    assert alone(p, "coulomb").effect == {"coulomb": p.effect["coulomb"]} and alone(p, "coulomb").command == p.command
+    (tr,) = pf.simulate([p], DUR)
+    (res,) = effect_residuals([p], [tr])
+    assert set(res) == {"all", "coulomb", "cogging"} and len(res["coulomb"]) == 2
+    ds = load_dataset(dict(pf.measure(p, tr)))
+    assert oracle_gain(ds, tr["t"], res["coulomb"]) > 0.5
+    assert oracle_gain(ds, tr["t"], res["cogging"]) < MIN_GAIN
+
+
+def _row(seed, hidden, verdict, ranked, oracle):
+    return {"seed": seed, "part": "tuning" if seed < 50 else "held_out", "period_ms": 1, "band": band_of(1),
+            "hidden": hidden, "verdict": verdict, "ranked": ranked, "gains": [0.0, 0.0], "seconds": 0.0,
+            **({"oracle_gain": oracle} if oracle is not None else {})}
+
+
+def test_scores_on_the_detectable_effects():
+    rows = [
+        _row(0, ["coulomb"], "missing_effect", ["coulomb", "stribeck"], {"coulomb": 0.8}),  # detectable, hit
+        _row(1, ["coulomb"], "no_missing_effect", ["stribeck", "delay"], {"coulomb": 0.02}),  # undetectable miss
+        _row(2, ["delay"], "no_missing_effect", ["stribeck", "coulomb"], {"delay": 0.3}),  # detectable miss
+        _row(3, ["cogging", "delay"], "missing_effect", ["delay", "x"], {"cogging": 0.05, "delay": 0.5}),
+        _row(4, ["backlash"], "missing_effect", ["delay", "x"], None),  # no oracle: unknown
+        _row(5, [], "missing_effect", ["delay", "x"], None),  # clean: not in the section
+    ]
+    d = detectable(rows, 0.1)
+    assert (d["n"], d["undetectable"], d["unknown"]) == (3, 2, 1)
+    assert d["top1"] == pytest.approx(2 / 3, abs=1e-3) and d["named"] == pytest.approx(2 / 3, abs=1e-3)
+    assert d["effects"]["coulomb"] == {"n": 1, "top1": 1.0, "top2": 1.0, "named": 1.0, "undetectable": 1,
+                                       "unknown": 0}
+    assert [(m["seed"], m["effect"], m["oracle_gain"]) for m in d["misses"]] == [(2, "delay", 0.3)]
+    s = score(rows, min_gain=0.1)
+    assert s["tuning"]["detectable"]["n"] == 3
+    assert s["tuning"]["top1"] == 0.333  # the raw scores still count every hidden effect (2 hits of 6)
+    assert score(rows)["tuning"]["detectable"]["min_gain"] == MIN_GAIN
