@@ -23,7 +23,7 @@ def test_bins_keep_the_used_columns_of_the_dense_design_in_order():
 
 def test_closed_form_fit_equals_the_dense_ridge_with_bins_empty_in_training():
     rng = np.random.default_rng(1)
-    for trial in range(20):
+    for _ in range(20):
         n, k = int(rng.integers(50, 3000)), int(rng.integers(2, 64))
         bins = _bins(rng.integers(0, k, size=n), k)
         y = rng.normal(size=n) * rng.uniform(1e-4, 1e3) + rng.normal()

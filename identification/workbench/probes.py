@@ -130,7 +130,12 @@ def probe_columns(signals, u: np.ndarray, only: str | None = None) -> dict[str, 
         if "ddq" in signals:
             cols.append(signals["ddq"])
         out["dynamics"] = np.column_stack(cols)
-    return {k: m if isinstance(m, Bins) else m[:, np.any(m != 0, axis=0)] for k, m in out.items()}
+    return {k: m if isinstance(m, Bins) else _nonzero_columns(m) for k, m in out.items()}
+
+
+def _nonzero_columns(m: np.ndarray) -> np.ndarray:
+    keep = m.any(axis=0)
+    return m if keep.all() else m[:, keep]
 
 
 def _ridge(a: np.ndarray, b: np.ndarray) -> np.ndarray:
