@@ -12,7 +12,8 @@ the stages it calls):
 - ``base``: the current model's shapes, its fit and its held-out prediction (``compare``, ``base_per_fold``);
 - ``grid``: every effect's held-out score, each shape of its grid fitted on each fold's training blocks;
 - ``full``: every effect's shape and coefficient on all samples;
-- ``check``: the faster-derivative check of a lag-like effect;
+- ``check``: the faster-derivative checks of a lag-like effect and of a probe that would call the log
+  ``unexplained`` (``recheck_probes``: its base fits; the probes it re-runs count as ``probes``);
 - ``probes``: the non-parametric probes;
 - ``verdict``: the verdict (confusion, tail);
 - ``other``: the rest of ``diagnose``.
@@ -36,8 +37,9 @@ STAGES = {  # module -> {function: stage}; functions a version of the code lacks
     "servotau.identification.workbench.diagnose": {
         "compare": "base", "base_per_fold": "base", "resolve_shapes": "base?", "_score_effect": "grid",
         "_full_fit": "full", "faster_derivative": "check", "_gain_with": "check", "probe_gains": "probes",
-        "verdict_of": "verdict",
+        "verdict_of": "verdict", "recheck_probes": "check",
     },
+    "servotau.identification.workbench.verdict": {"probe_gains": "probes"},
 }
 
 

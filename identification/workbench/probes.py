@@ -60,10 +60,25 @@ def base_per_fold(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], c
     return out
 
 
-def _onehot(index: np.ndarray, k: int) -> np.ndarray:
-    m = np.zeros((len(index), k))
-    m[np.arange(len(index)), index] = 1.0
-    return m
+@dataclass(frozen=True, eq=False)
+class Bins:
+    """A one-hot family kept as its bin indices: ``index`` of each sample in ``0 .. k - 1``, every bin used by some
+    sample (the columns ``index == j`` of a dense design, without a 100k x k matrix)."""
+
+    index: np.ndarray
+    k: int
+
+    def columns(self) -> np.ndarray:
+        """The dense one-hot design (n x k), for tests."""
+        m = np.zeros((len(self.index), self.k))
+        m[np.arange(len(self.index)), self.index] = 1.0
+        return m
+
+
+def _bins(index: np.ndarray, k: int) -> Bins:
+    """The ``k`` possible bins of ``index`` renumbered to the used ones, in order."""
+    used = np.bincount(index, minlength=k) > 0
+    return Bins((np.cumsum(used) - 1)[index], int(np.count_nonzero(used)))
 
 
 def _quantile_bins(x: np.ndarray, k: int) -> np.ndarray:
@@ -75,31 +90,37 @@ def _velocity_class(dq: np.ndarray, v: float = 0.01) -> np.ndarray:
     return np.where(dq > v, 2, np.where(dq < -v, 0, 1))
 
 
-def _by_class(x: np.ndarray, cls: np.ndarray, k: int) -> np.ndarray:
+def _by_class(x: np.ndarray, cls: np.ndarray, k: int) -> Bins:
     b = _quantile_bins(x, k)
-    return _onehot(cls * (b.max() + 1) + b, 3 * (b.max() + 1))
+    return _bins(cls * (b.max() + 1) + b, 3 * (b.max() + 1))
 
 
-def probe_columns(signals, u: np.ndarray) -> dict[str, np.ndarray]:
-    """Flexible regressors of each signal family (columns without any sample dropped)."""
+def probe_columns(signals, u: np.ndarray, only: str | None = None) -> dict[str, Bins | np.ndarray]:
+    """Flexible regressors of each signal family (of ``only`` if given): :class:`Bins` for the one-hot families
+    (velocity, torque and ``u`` by velocity sign, position), dense columns without any sample dropped for the
+    others (time, dynamics)."""
+    want = lambda family: only is None or only == family  # noqa: E731
     dq = signals["dq"]
-    cls = _velocity_class(dq)
-    out = {"velocity": _onehot(_quantile_bins(dq, 24), 24)}
-    if "tau" in signals:
-        out["torque"] = _by_class(signals["tau"], cls, 12)
-    out["servo_error"] = _by_class(u, cls, 12)
-    if "q" in signals:
+    out: dict[str, Bins | np.ndarray] = {}
+    if want("velocity"):
+        out["velocity"] = _bins(_quantile_bins(dq, 24), 24)
+    if want("torque") or want("servo_error"):
+        cls = _velocity_class(dq)
+        if "tau" in signals and want("torque"):
+            out["torque"] = _by_class(signals["tau"], cls, 12)
+        if want("servo_error"):
+            out["servo_error"] = _by_class(u, cls, 12)
+    if "q" in signals and want("position"):
         q = signals["q"]
         span = float(np.ptp(q))
         if span > 0:
-            idx = np.minimum(((q - q.min()) / span * 64).astype(int), 63)
-            out["position"] = _onehot(idx, 64)
-    if "t" in signals:
+            out["position"] = _bins(np.minimum(((q - q.min()) / span * 64).astype(int), 63), 64)
+    if "t" in signals and want("time"):
         t = signals["t"]
         x = (t - t.mean()) / (np.ptp(t) or 1.0)
         s = np.tanh(dq / 0.01)
         out["time"] = np.column_stack([x, x * x, x * dq, x * x * dq, x * s, x * x * s])
-    if signals.dt is not None:
+    if signals.dt is not None and want("dynamics"):
         cols = []
         for lag in (0.002, 0.005, 0.01, 0.02, 0.04):
             k = ticks(lag, signals.dt)
@@ -109,10 +130,16 @@ def probe_columns(signals, u: np.ndarray) -> dict[str, np.ndarray]:
         if "ddq" in signals:
             cols.append(signals["ddq"])
         out["dynamics"] = np.column_stack(cols)
-    return {k: m[:, np.any(m != 0, axis=0)] for k, m in out.items()}
+    return {k: m if isinstance(m, Bins) else _nonzero_columns(m) for k, m in out.items()}
+
+
+def _nonzero_columns(m: np.ndarray) -> np.ndarray:
+    keep = m.any(axis=0)
+    return m if keep.all() else m[:, keep]
 
 
 def _ridge(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Coefficients of ``a x ~ b``: the columns scaled to unit RMS, a ridge of 1e-6 times the mean diagonal."""
     scale = np.sqrt(np.mean(a * a, axis=0))
     scale[scale == 0] = 1.0
     an = a / scale
@@ -121,20 +148,37 @@ def _ridge(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.solve(g, an.T @ b) / scale
 
 
+def _bin_ridge(index: np.ndarray, k: int, b: np.ndarray) -> np.ndarray:
+    """:func:`_ridge` of the one-hot design of ``index`` (``k`` bins) in closed form, linear in the samples: the
+    scaled Gram matrix is diagonal, ``n`` for a bin with samples (scale ``sqrt(count / n)``), 0 for an empty one
+    (scale 1), so each coefficient is its bin's sum of ``b`` over ``count + ridge count / n``."""
+    n = len(index)
+    count = np.bincount(index, minlength=k)
+    total = np.bincount(index, weights=b, minlength=k)
+    used = count > 0
+    scale = np.where(used, np.sqrt(count / n), 1.0)
+    g = np.where(used, float(n), 0.0)
+    return total / scale / (g + 1e-6 * g.sum() / k) / scale
+
+
 def probe_gains(
     ds: Dataset, bases: list[FoldBase], base: FittedModel, loss: Loss, e0: float, only: str | None = None
 ) -> dict[str, float]:
     y = ds.target
-    cols = probe_columns(ds.signals, base.u(ds.signals))
+    cols = probe_columns(ds.signals, base.u(ds.signals), only)
     out = {}
     for family, p in cols.items():
-        if p.shape[1] == 0 or (only is not None and family != only):
+        if (p.k if isinstance(p, Bins) else p.shape[1]) == 0:
             continue
         pred = np.full(ds.n, np.nan)
         for b in bases:
             tr, te = b.fold.train, b.fold.test
-            beta = _ridge(p[tr], y[tr] - b.pred[tr])
-            pred[te] = b.pred[te] + p[te] @ beta
+            if isinstance(p, Bins):
+                beta = _bin_ridge(p.index[tr], p.k, y[tr] - b.pred[tr])
+                pred[te] = b.pred[te] + beta[p.index[te]]
+            else:
+                beta = _ridge(p[tr], y[tr] - b.pred[tr])
+                pred[te] = b.pred[te] + p[te] @ beta
         out[family] = 1.0 - error_of(y - pred, y, loss) / e0 if e0 > 0 else 0.0
     if ds.signals.dt is not None and only in (None, "memory"):
         out["memory"] = _memory_gain(ds, bases, loss, e0)
