@@ -88,3 +88,14 @@ def test_a_gap_in_one_log_restarts_the_effects_filters(effect):
     for shape in eff.grid_for(sig):
         parts = [eff.columns(p.signals.with_columns(u=p.target.copy()), shape) for p in (left, right)]
         np.testing.assert_allclose(eff.columns(sig, shape), np.concatenate(parts), rtol=1e-9, atol=1e-12)
+
+
+def test_the_dynamics_probe_reads_no_sample_of_another_recording():
+    """The dynamics probe's lagged and led columns on a joined log are each recording's own, concatenated."""
+    from servotau.identification.workbench.probes import probe_columns
+
+    parts = [load_dataset(_log(seed, n)) for seed, n in ((4, 1200), (5, 1000))]
+    ds = combine(parts)
+    joined = probe_columns(ds.signals, ds.target, "dynamics")["dynamics"]
+    alone = [probe_columns(p.signals, p.target, "dynamics")["dynamics"] for p in parts]
+    np.testing.assert_allclose(joined, np.vstack(alone), rtol=1e-12, atol=1e-15)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from servotau.actuator import Loss
-from servotau.actuator.signals import delayed, ticks
+from servotau.actuator.signals import delayed, per_run, ticks
 
 from ..data.folds import Fold
 from .data import Dataset
@@ -121,12 +121,12 @@ def probe_columns(signals, u: np.ndarray, only: str | None = None) -> dict[str, 
         s = np.tanh(dq / 0.01)
         out["time"] = np.column_stack([x, x * x, x * dq, x * x * dq, x * s, x * x * s])
     if signals.dt is not None and want("dynamics"):
-        cols = []
+        cols, starts = [], signals.starts  # lags and leads read no sample of another recording or run
         for lag in (0.002, 0.005, 0.01, 0.02, 0.04):
             k = ticks(lag, signals.dt)
-            cols += [delayed(u, k) - u, np.concatenate([u[k:], np.full(k, u[-1])]) - u]
+            cols += [delayed(u, k, starts) - u, per_run(lambda v, k=k: _advanced(v, k), starts, u) - u]
             if "q_des" in signals:
-                cols.append(signals["q_des"] - delayed(signals["q_des"], k))
+                cols.append(signals["q_des"] - delayed(signals["q_des"], k, starts))
         if "ddq" in signals:
             cols.append(signals["ddq"])
         out["dynamics"] = np.column_stack(cols)
@@ -185,6 +185,11 @@ def probe_gains(
     return out
 
 
+def _advanced(x: np.ndarray, n: int) -> np.ndarray:
+    """``x`` read ``n`` samples ahead, the last value repeated past the end."""
+    return np.concatenate([x[n:], np.full(min(n, len(x)), x[-1])])[:len(x)]
+
+
 def _memory_gain(ds: Dataset, bases: list[FoldBase], loss: Loss, e0: float) -> float:
     """Held-out gain of predicting the residual from its own past (:data:`MEMORY_LAGS` x :data:`MEMORY_HORIZON_S`):
     per block, the residual of the model fitted on the other blocks, its past read causally."""
@@ -194,7 +199,7 @@ def _memory_gain(ds: Dataset, bases: list[FoldBase], loss: Loss, e0: float) -> f
     for b in bases:
         tr, te = b.fold.train, b.fold.test
         r = y - b.pred
-        p = np.column_stack([delayed(r, k * h) for k in MEMORY_LAGS])
+        p = np.column_stack([delayed(r, k * h, ds.signals.starts) for k in MEMORY_LAGS])
         pred[te] = b.pred[te] + p[te] @ _ridge(p[tr], r[tr])
     return 1.0 - error_of(y - pred, y, loss) / e0 if e0 > 0 else 0.0
 
