@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from support.synthetic import cogging_truth, synthetic_table
+from support.synthetic import cogging_truth, friction_recording, synthetic_table
 
 from servotau.cli import main
 from servotau.identification import MotorParameters
@@ -131,14 +131,7 @@ def test_missing_column_and_nan_rows(capsys, tmp_path):
 
 def _friction_csvs(tmp_path, k=3):
     """``k`` recordings of one joint's friction torque [N m] = 0.2 + 1.5 sign(v) + 3 v + noise (no torque)."""
-    paths = []
-    for i in range(k):
-        rng = np.random.default_rng(i)
-        t = np.arange(0.0, 4.0, 0.004)
-        v = 0.4 * np.sin(2 * np.pi * (0.25 + 0.05 * i) * t) + 0.2 * np.sin(2 * np.pi * 0.9 * t + i)
-        f = 0.2 + 1.5 * np.tanh(v / 0.01) + 3.0 * v + 0.02 * rng.standard_normal(t.size)
-        paths.append(str(write_table({"t": t, "v": v, "friction": f}, tmp_path / f"rec{i}.csv")))
-    return paths
+    return [str(write_table(friction_recording(i, seconds=4.0, f0=0.25), tmp_path / f"rec{i}.csv")) for i in range(k)]
 
 
 FRICTION = ["--map", "time=t", "--map", "velocity=v", "--map", "target=friction", "--base", "coulomb", "--json",

@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from support.synthetic import cogging_truth, synthetic_table
+from support.synthetic import cogging_truth, friction_recording, synthetic_table
 
 from servotau.cli import main
 from servotau.identification.data import write_table
@@ -106,14 +106,7 @@ def test_offset_with_the_asymmetric_loss_and_off_on_servo_logs(capsys, tmp_path)
 
 def _friction_recordings(tmp_path, k=3):
     """``k`` friction recordings of the same joint (different noise seeds and velocity profiles)."""
-    paths = []
-    for i in range(k):
-        rng = np.random.default_rng(i)
-        t = np.arange(0.0, 8.0, 0.004)
-        v = 0.4 * np.sin(2 * np.pi * (0.2 + 0.05 * i) * t) + 0.2 * np.sin(2 * np.pi * 0.9 * t + i)
-        f = 0.2 + 1.5 * np.tanh(v / 0.01) + 3.0 * v + 0.02 * rng.standard_normal(t.size)
-        paths.append(write_table({"t": t, "v": v, "friction": f}, tmp_path / f"rec{i}.csv"))
-    return paths
+    return [write_table(friction_recording(i, seconds=8.0, f0=0.2), tmp_path / f"rec{i}.csv") for i in range(k)]
 
 
 def test_several_recordings_are_held_out_one_by_one(capsys, tmp_path):

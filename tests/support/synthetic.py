@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["K_C", "K_TAU", "K_V", "cogging_truth", "synthetic_table"]
+__all__ = ["K_C", "K_TAU", "K_V", "cogging_truth", "friction_recording", "synthetic_table"]
 
 K_TAU, K_V, K_C = 5e-5, 6e-3, 1.3e-4  # [rad/(N m)], [rad/(rad/s)], [rad]
 
@@ -36,3 +36,13 @@ def synthetic_table(extra=None, *, seconds=12.0, seed=0, noise=1e-5, reversals=T
 def cogging_truth(t, q, dq, tau):
     """A position ripple of 0.08 rad period and 0.2 mrad amplitude [rad] (the hidden effect of several tests)."""
     return 2e-4 * np.sin(2 * np.pi * q / 0.08 + 0.3)
+
+
+def friction_recording(i: int, *, seconds: float, f0: float) -> dict[str, np.ndarray]:
+    """Recording ``i`` of one joint's friction torque [N m] = 0.2 + 1.5 sign(v) + 3 v + noise (no servo error, no
+    torque column): ``t, v, friction`` at 250 Hz; the velocity's slow sine runs at ``f0 + 0.05 i`` [Hz]."""
+    rng = np.random.default_rng(i)
+    t = np.arange(0.0, seconds, 0.004)
+    v = 0.4 * np.sin(2 * np.pi * (f0 + 0.05 * i) * t) + 0.2 * np.sin(2 * np.pi * 0.9 * t + i)
+    f = 0.2 + 1.5 * np.tanh(v / 0.01) + 3.0 * v + 0.02 * rng.standard_normal(t.size)
+    return {"t": t, "v": v, "friction": f}
