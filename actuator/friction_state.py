@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .signals import Signals, run_bounds
+from .signals import Signals, delayed, per_run
 
 FRICTION_COEFFICIENT = (0.0, float("inf"))
 """Friction opposes the motion: its coefficient ``k_tau F >= 0`` (a negative one would push the joint along)."""
@@ -63,7 +63,7 @@ def step(dq: float, dt: float, x0: float, gain: float = 1.0) -> tuple[float, flo
 def state(s: Signals, what: str, x0: float, gain: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
     """The state ``z`` of every sample of ``s`` (``gain(dq)``: the steady state's magnitude, default 1)."""
     dt = s.require_dt(what)
-    v = mean_velocity(s["dq"], s.starts)
+    v = s.derived("dq", ("mean_velocity", s.starts), lambda dq: mean_velocity(dq, s.starts))  # once per log
     a, b = steps(v, dt, x0, 1.0 if gain is None else gain(v))
     a[list(s.starts[1:])] = 0.0  # z[start - 1] is not this run's: the state restarts from 0
     return affine_scan(a, b)
@@ -72,10 +72,7 @@ def state(s: Signals, what: str, x0: float, gain: Callable[[np.ndarray], np.ndar
 def mean_velocity(dq: np.ndarray, starts: Sequence[int] | None = None) -> np.ndarray:
     """``(dq[k-1] + dq[k]) / 2`` [rad/s], the mean velocity of each tick (``dq[-1] = dq[0]``, and likewise at
     each of ``starts``)."""
-    prev = np.concatenate([dq[:1], dq[:-1]])
-    if starts is not None and len(starts) > 1:
-        prev[list(starts)] = dq[list(starts)]
-    return 0.5 * (dq + prev)
+    return 0.5 * (dq + delayed(dq, 1, starts)) if len(dq) else dq.copy()
 
 
 class OnlineState:
@@ -106,10 +103,7 @@ def strokes(dq: np.ndarray, dt: float, starts: Sequence[int] | None = None) -> n
     v = np.quantile(np.abs(dq), 0.95) if len(dq) else 0.0
     if not v > 0:
         return np.zeros(0)
-    bounds = run_bounds(len(dq), starts)
-    if len(bounds) > 1:
-        return np.concatenate([_strokes(dq[a:b], dt, v) for a, b in bounds])
-    return _strokes(dq, dt, v)
+    return per_run(lambda d: _strokes(d, dt, v), starts, dq)
 
 
 def _strokes(dq: np.ndarray, dt: float, v: float) -> np.ndarray:

@@ -102,7 +102,7 @@ class MotorParameters(Mapping[str, MotorModel]):
             "# servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
             "# Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
         ]
-        if any(_general(m) for m in self.models.values()):
+        if any(m.servo_issue() is not None for m in self.models.values()):  # a model for another use
             lines.append("# A joint with 'target' and 'unit' U predicts that instead: k_tau [U/(N m)], "
                          "k_v [U/(rad/s)], k_c, offset and rms [U]; a key left out is a term not in the model.")
         lines.append(f"version = {FORMAT_VERSION}")
@@ -158,10 +158,6 @@ class MotorParameters(Mapping[str, MotorModel]):
         if not joints.keys():
             raise root.error("joints", {}, "at least one joint table")
         return cls({name: _load_model(joints.section(name)) for name in joints.keys()}, source=root.file)
-
-
-def _general(m: MotorModel) -> bool:
-    return not m.is_servo_error or m.k_tau is None or m.offset is not None
 
 
 def _load_model(sec: Section) -> MotorModel:

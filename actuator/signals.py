@@ -151,6 +151,13 @@ def delayed(x: np.ndarray, n: int, starts: Sequence[int] | None = None) -> np.nd
     return np.concatenate([np.full(n, x[0]), x[:-n]])
 
 
+def advanced(x: np.ndarray, n: int, starts: Sequence[int] | None = None) -> np.ndarray:
+    """``x`` read ``n`` samples ahead, the last value of each run repeated past its end."""
+    if starts is not None and len(starts) > 1:
+        return per_run(lambda v: advanced(v, n), starts, x)
+    return np.concatenate([x[n:], np.full(min(n, len(x)), x[-1])])[:len(x)]
+
+
 def lowpass_gain(time_constant: float, dt: float) -> float:
     """Gain ``a`` of ``y += a (x - y)``, the backward-Euler first-order lag of ``time_constant`` [s]."""
     return dt / (time_constant + dt)

@@ -480,6 +480,4 @@ def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float
         return ds, 0.0
     sig = ds.signals.with_columns(tau=per_run(lambda x: shift(x, best, fill="hold"), ds.signals.starts, tau))
     note = f"tau: advanced by {best * ds.dt * 1e3:.0f} ms to match the encoders (estimator delay)"
-    out = Dataset(sig, ds.target, ds.segment, ds.roles, ds.source, ds.joint, ds.n_dropped, (*ds.notes, note),
-                  ds.preprocessing)
-    return out, best * ds.dt
+    return replace(ds, signals=sig, notes=(*ds.notes, note)), best * ds.dt

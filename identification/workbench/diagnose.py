@@ -57,7 +57,7 @@ from ..data.folds import Fold, folds_of
 from .data import Dataset, faster_derivative
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
-from .model import FittedModel, ModelSpec, Term, fit_spec, resolve_shapes, solve, solve_gram
+from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, probe_gains
 from .verdict import Candidate, Confusion, Diagnosis, recheck_probes, verdict_of
 
@@ -81,10 +81,7 @@ _LS = Loss.least_squares()
 def _effect_columns(effect: Effect, signals, ctx: dict, shape, cache: dict) -> np.ndarray:
     if effect.uses_model:
         return effect.columns(signals.with_columns(**ctx), shape)
-    key = (effect.name, tuple(sorted(shape.items())))
-    if key not in cache:
-        cache[key] = effect.columns(signals, shape)
-    return cache[key]
+    return effect_columns(effect, signals, shape, cache)
 
 
 def _score_effect(

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from servotau.actuator import Loss
-from servotau.actuator.signals import delayed, per_run, ticks
+from servotau.actuator.signals import advanced, delayed, ticks
 
 from ..data.folds import Fold
 from .data import Dataset
@@ -124,7 +124,7 @@ def probe_columns(signals, u: np.ndarray, only: str | None = None) -> dict[str, 
         cols, starts = [], signals.starts  # lags and leads read no sample of another recording or run
         for lag in (0.002, 0.005, 0.01, 0.02, 0.04):
             k = ticks(lag, signals.dt)
-            cols += [delayed(u, k, starts) - u, per_run(lambda v, k=k: _advanced(v, k), starts, u) - u]
+            cols += [delayed(u, k, starts) - u, advanced(u, k, starts) - u]
             if "q_des" in signals:
                 cols.append(signals["q_des"] - delayed(signals["q_des"], k, starts))
         if "ddq" in signals:
@@ -183,11 +183,6 @@ def probe_gains(
     if ds.signals.dt is not None and only in (None, "memory"):
         out["memory"] = _memory_gain(ds, bases, loss, e0)
     return out
-
-
-def _advanced(x: np.ndarray, n: int) -> np.ndarray:
-    """``x`` read ``n`` samples ahead, the last value repeated past the end."""
-    return np.concatenate([x[n:], np.full(min(n, len(x)), x[-1])])[:len(x)]
 
 
 def _memory_gain(ds: Dataset, bases: list[FoldBase], loss: Loss, e0: float) -> float:

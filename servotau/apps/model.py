@@ -265,7 +265,7 @@ def run(args: argparse.Namespace) -> int:
                 out["saved"]["dead_band"] = d
                 say(f"deadzone: d = {1e3 * d:.3f} mrad on the holds of {args.log[0]}")
     if args.test:
-        final = (ladder.rungs[-1].comparison.model if ladder is not None
+        final = (ladder.final if ladder is not None
                  else comparison.model if comparison is not None else diagnosis.base.model)
         test = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.test])
         _has_signals(final, test, f"the model fitted on {ds.source}")
