@@ -9,7 +9,7 @@ import pytest
 
 from servotau.experiments import plant_family as pf
 from servotau.experiments.plant_oracle import alone, effect_residuals, oracle_gain, servo_residual
-from servotau.experiments.plant_scoring import band_of, detectable, score
+from servotau.experiments.plant_scoring import band_of, confusion, detectable, score
 from servotau.identification.workbench import MIN_GAIN, load_dataset
 
 DUR = 2.0  # [s]
@@ -86,3 +86,12 @@ def test_scores_on_the_detectable_effects():
     assert s["tuning"]["detectable"]["n"] == 3
     assert s["tuning"]["top1"] == 0.333  # the raw scores still count every hidden effect (2 hits of 6)
     assert score(rows)["tuning"]["detectable"]["min_gain"] == MIN_GAIN
+
+
+def test_named_is_what_the_verdict_names_not_the_first_ranked():
+    """A first-ranked effect that failed in too many blocks is not named: the row's ``named`` is scored."""
+    row = {"seed": 0, "part": "tuning", "period_ms": 1, "band": "1-2 ms", "hidden": ["coulomb"],
+           "verdict": "missing_effect", "named": "coulomb", "ranked": ["delay", "coulomb"], "gains": [0.3, 0.2]}
+    s = score([row])["tuning"]
+    assert s["top1"] == 0.0 and s["top2"] == 1.0 and s["named"] == 1.0
+    assert confusion([row]) == {"coulomb": {"coulomb": 1}}

@@ -64,7 +64,8 @@ def diagnose_log(log: dict) -> dict:
         return {"verdict": f"error: {type(exc).__name__}: {exc}"[:200], "ranked": [], "gains": [],
                 "seconds": time.perf_counter() - start}
     top = [c for c in d.ranking if c.testable][:2]
-    return {"verdict": d.verdict, "ranked": [c.effect for c in top],
+    named = d.top.effect if d.verdict == "missing_effect" else None  # what the verdict names (may be ranked second)
+    return {"verdict": d.verdict, "named": named, "ranked": [c.effect for c in top],
             "gains": [round(float(c.heldout_gain), 4) for c in top], "seconds": time.perf_counter() - start}
 
 
@@ -129,8 +130,6 @@ def _score_rows(rows: list[dict]) -> dict:
     per = defaultdict(lambda: Counter())
     clean = Counter()
     for r in rows:
-        top = r["ranked"]
-        named = top[0] if r["verdict"] == "missing_effect" and top else None
         if not r["hidden"]:
             clean["n"] += 1
             clean["false_alarm"] += r["verdict"] == "missing_effect"
@@ -140,9 +139,10 @@ def _score_rows(rows: list[dict]) -> dict:
         for e in r["hidden"]:
             c = per[e]
             c["n"] += 1
-            c["top1"] += bool(top) and accepted(e, top[0])
-            c["top2"] += any(accepted(e, x) for x in top[:2])
-            c["named"] += accepted(e, named)
+            top1, top2, named = _hits(r, e)
+            c["top1"] += top1
+            c["top2"] += top2
+            c["named"] += named
     effects = {e: {"n": c["n"], "top1": _rate(c["top1"], c["n"]), "top2": _rate(c["top2"], c["n"]),
                    "named": _rate(c["named"], c["n"])} for e, c in sorted(per.items())}
     n_eff = sum(c["n"] for c in per.values())
@@ -154,11 +154,17 @@ def _score_rows(rows: list[dict]) -> dict:
                       "unexplained": _rate(clean["unexplained"], clean["n"]), "errors": clean["error"]}}
 
 
+def _named(r: dict) -> str | None:
+    """The effect the row's verdict names (rows written before ``named`` was recorded: the first ranked)."""
+    if r["verdict"] != "missing_effect":
+        return None
+    return r.get("named") or (r["ranked"][0] if r["ranked"] else None)
+
+
 def _hits(r: dict, e: str) -> tuple[bool, bool, bool]:
     """(top1, top2, named) of hidden effect ``e`` in row ``r``."""
     top = r["ranked"]
-    named = top[0] if r["verdict"] == "missing_effect" and top else None
-    return bool(top) and accepted(e, top[0]), any(accepted(e, x) for x in top[:2]), accepted(e, named)
+    return bool(top) and accepted(e, top[0]), any(accepted(e, x) for x in top[:2]), accepted(e, _named(r))
 
 
 def detectable(rows: list[dict], min_gain: float) -> dict:
@@ -201,7 +207,7 @@ def confusion(rows: list[dict]) -> dict:
     """Rows: hidden effect ('none' for clean); columns: the named effect, or the verdict when none is named."""
     m: dict[str, Counter] = defaultdict(Counter)
     for r in rows:
-        col = r["ranked"][0] if r["verdict"] == "missing_effect" and r["ranked"] else r["verdict"]
+        col = _named(r) or r["verdict"]
         for e in r["hidden"] or ["none"]:
             m[e][col] += 1
     return {e: dict(sorted(c.items())) for e, c in sorted(m.items())}
