@@ -277,19 +277,6 @@ def measure(plant: Plant, true: dict) -> dict:
     return {"t": true["t"][sl].copy(), "q": q, "q_des": true["q_des"][sl].copy(), "tau": tau}
 
 
-def make_family(seeds, *, duration: float = DURATION, batch: int = 64, progress=None) -> list[tuple[dict, dict]]:
-    """(log, truth) for each seed; the log is a dict of columns ``t, q, q_des, tau``."""
-    seeds = list(seeds)
-    out = []
-    for b in range(0, len(seeds), batch):
-        plants = [draw_plant(s, duration=duration) for s in seeds[b:b + batch]]
-        if progress:
-            progress(f"simulating plants {seeds[b]}..{seeds[b] + len(plants) - 1}")
-        for p, tr in zip(plants, simulate(plants, duration), strict=True):
-            out.append((measure(p, tr), p.truth()))
-    return out
-
-
 def write_csv(log: dict, path) -> None:
     """The log as the workbench reads it: a CSV with columns t, q, q_des, tau."""
     cols = ("t", "q", "q_des", "tau")

@@ -26,8 +26,8 @@ from concurrent.futures import ProcessPoolExecutor
 from .plant_family import EFFECTS, draw_plant, measure, simulate
 from .plant_oracle import effect_residuals, oracle_gain
 
-# The workbench's names that count as finding each hidden effect. The workbench has no power-law viscous term
-# yet (issue 18, item 4): any effect whose name mentions viscous or power counts.
+# The workbench's names that count as finding each hidden effect: its own name; for the power-law viscous friction
+# any name that mentions viscous or power (the library's is viscous_power; a user's variant counts too).
 ACCEPT: dict[str, tuple[str, ...]] = {e: (e,) for e in EFFECTS}
 BANDS = ((1, 2, "1-2 ms"), (3, 6, "3-6 ms"), (7, 16, "7-16 ms"))
 SPLIT = 50  # seeds below: tuning part; at or above: held-out part
