@@ -84,9 +84,10 @@ def test_a_gap_in_one_log_restarts_the_effects_filters(effect):
     left = load_dataset({k: v[:500] for k, v in a.items()}, **opts)
     right = load_dataset({k: v[520:] for k, v in a.items()}, **opts)
     eff = next(e for e in builtin_effects() if e.name == effect)
-    sig = ds.signals.with_columns(u=ds.target.copy())
+    sig = ds.signals.with_columns(u=ds.target.copy(), u_tau=ds.signals["tau"].copy())
     for shape in eff.grid_for(sig):
-        parts = [eff.columns(p.signals.with_columns(u=p.target.copy()), shape) for p in (left, right)]
+        parts = [eff.columns(p.signals.with_columns(u=p.target.copy(), u_tau=p.signals["tau"].copy()), shape)
+                 for p in (left, right)]
         np.testing.assert_allclose(eff.columns(sig, shape), np.concatenate(parts), rtol=1e-9, atol=1e-12)
 
 

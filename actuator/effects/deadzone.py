@@ -56,7 +56,8 @@ from ..signals import Signals, command_lead, direction_latch, hysteresis, sample
 ORDER = 50
 REST = (0.0, 0.01, 0.05)  # [rad/s] resting below this speed at the last edge (0: no latch)
 BANDS = (3e-5, 1e-4, 3e-4, 1e-3)  # [rad] the effort's smoothing band (the detector of the crossing form)
-SHARES = (0.0, 0.33, 0.67)  # the part of k_v that is the servo's damping (0: a dead band on the error)
+SHARES = (0.0, 0.33, 0.67, 1.0)  # the part of k_v that is the servo's damping (0: a dead band on the error;
+# 1: on the driver's current, after the whole PD: then the effort is the torque itself)
 DZ_RELEASE = 1.5
 """Crossing form: the joint leaves the band when ``|m|`` exceeds ``DZ_RELEASE band`` and enters it when ``|m|``
 falls to ``band`` (hysteresis: the effort hovers at the band's edge during a slow crossing, and each flicker

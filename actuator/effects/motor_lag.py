@@ -1,6 +1,11 @@
-"""``motor_lag``: first-order lag of the servo (current loop, filters).
+"""``motor_lag``: first-order lag of the servo's torque (current loop, filters).
 
-``phi = lag(u, time_constant) - u``. On-line: ``tau``, ``dq`` and their history (a first-order lag).
+The motor torque lags the servo's command: ``T dtau/dt = K e - D dq - tau``, so the command the servo worked from
+is ``tau + T dtau/dt``, not the measured ``tau``, and the error ``e = k_tau (tau + T dtau/dt) + k_v dq``. The
+regressor is ``phi = lag(u_tau, time_constant) - u_tau`` (``u_tau = k_tau tau``), about
+``-time_constant d(u_tau)/dt`` on slow motion, so its coefficient is about ``-T / time_constant``: negative for a
+lag (``LAG_COEFFICIENT``; a positive one would be a lead, not this effect). Only the torque part lags: the
+damping ``k_v dq`` acts on the measured velocity. On-line: ``tau`` and its history (a first-order lag).
 """
 
 from __future__ import annotations
@@ -16,10 +21,11 @@ from ..signals import OnlineLag, Signals, lowpass
 ORDER = 130
 SHAPES = tuple({"time_constant": v} for v in (0.005, 0.01, 0.02, 0.05))  # [s]
 GRID = ResolvedGrid(SHAPES, ("time_constant",))  # the time constants the sample period resolves
+LAG_COEFFICIENT = (float("-inf"), 0.0)  # -T / time_constant: a lag, never a lead
 
 
 def motor_lag(s: Signals, time_constant: float) -> np.ndarray:
-    u = s["u"]
+    u = s["u_tau"]
     return lowpass(u, time_constant, s.require_dt("motor_lag"), starts=s.starts) - u
 
 
@@ -28,10 +34,10 @@ class MotorLagOnline(OnlineLag):
         super().__init__(shape["time_constant"], period, None)
 
     def value(self, x: Mapping[str, float]) -> float:
-        return self._next(x["u"]) - x["u"]
+        return self._next(x["u_tau"]) - x["u_tau"]
 
     def commit(self, x: Mapping[str, float]) -> None:
-        self.y = self._next(x["u"])
+        self.y = self._next(x["u_tau"])
 
 
 def needs(e: Excitation) -> str | None:
@@ -40,13 +46,15 @@ def needs(e: Excitation) -> str | None:
 
 
 EFFECT = Effect(
-    "motor_lag", motor_lag, GRID, ("t", "tau", "dq", "u"),
-    signature="residual correlates with -du/dt: the servo reaches the expected error after a first-order lag",
+    "motor_lag", motor_lag, GRID, ("t", "tau", "u_tau"),
+    signature="residual correlates with the torque's rate: the motor torque reaches the servo's command after a "
+              "first-order lag",
     family="dynamics",
-    description="first-order lag of the servo (current loop, filters)",
+    description="first-order lag of the servo's torque (current loop, filters)",
     needs=needs,
     online=MotorLagOnline,
     history=True,
-    online_signals="tau, dq (history: a first-order lag)",
+    online_signals="tau (history: a first-order lag)",
+    coefficient_range=LAG_COEFFICIENT,
     confusable=("delay", "elastic"),
 )

@@ -1,8 +1,10 @@
-"""``thermal_drift``: friction changing with the winding temperature (heated by the current).
+"""``thermal_drift``: the servo changing with the winding temperature (heated by the current).
 
-``phi = h dq``, ``h = lag((u / U_REF)^2, tau_th)``: a heating proxy, the servo effort squared through a
-first-order lag of ``tau_th`` [s]. On-line: ``tau``, ``dq`` and their history (a first-order lag of the servo
-effort).
+``h = lag((u / U_REF)^2, tau_th)``: a heating proxy, the servo effort squared through a first-order lag of
+``tau_th`` [s]. Two forms (shape ``gain``): ``phi = h dq`` (``gain = 0``): the friction's velocity slope changes
+as the lubricant heats; ``phi = -h u`` (``gain = 1``): the torque per ampere falls as the winding's resistance
+and magnets heat, so the servo needs more error ``u`` for the same torque. Either way the coefficient is <= 0
+(``THERMAL_COEFFICIENT``). On-line: ``tau``, ``dq`` and their history (a first-order lag of the servo effort).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from ..signals import OnlineLag, Signals, lowpass
 
 ORDER = 100
 U_REF = 1e-3  # [rad] scale of u in the heating proxy
-GRID = tuple({"tau_th": v} for v in (10.0, 30.0, 100.0))  # [s]
+GRID = tuple({"tau_th": v, "gain": g} for g in (0.0, 1.0) for v in (3.0, 10.0, 30.0, 100.0))  # [s], form
 THERMAL_COEFFICIENT = (-math.inf, 0.0)
 """Heat lowers the lubricant's viscosity: the velocity slope falls as the winding heats (the coefficient is <= 0).
 A positive coefficient (friction growing with the dissipated power) is a memory correction of high effort, not a
@@ -26,18 +28,19 @@ drift: fitted on simulated logs with a current limit and no drift, the slope wou
 (the simulated drift: -25 %)."""
 
 
-def thermal_drift(s: Signals, tau_th: float) -> np.ndarray:
+def thermal_drift(s: Signals, tau_th: float, gain: float = 0.0) -> np.ndarray:
     dt = s.require_dt("thermal_drift")
     heat = lowpass((s["u"] / U_REF) ** 2, tau_th, dt, y0=0.0, starts=s.starts)
-    return heat * s["dq"]
+    return -heat * s["u"] if gain else heat * s["dq"]
 
 
 class ThermalOnline(OnlineLag):
     def __init__(self, shape: Mapping[str, float], period: float):
         super().__init__(shape["tau_th"], period, 0.0)
+        self.gain = bool(shape.get("gain", 0.0))
 
     def value(self, x: Mapping[str, float]) -> float:
-        return self._next((x["u"] / U_REF) ** 2) * x["dq"]
+        return self._next((x["u"] / U_REF) ** 2) * (-x["u"] if self.gain else x["dq"])
 
     def commit(self, x: Mapping[str, float]) -> None:
         self.y = self._next((x["u"] / U_REF) ** 2)
@@ -52,9 +55,9 @@ def needs(e: Excitation) -> str | None:
 
 EFFECT = Effect(
     "thermal_drift", thermal_drift, GRID, ("t", "tau", "dq", "u"),
-    signature="residual against time: the velocity slope of the residual drifts as the motor heats",
+    signature="residual against time: the velocity slope or the gain of the residual drifts as the motor heats",
     family="time",
-    description="friction changing with the winding temperature (heated by the current)",
+    description="friction or torque constant changing with the winding temperature (heated by the current)",
     needs=needs,
     online=ThermalOnline,
     history=True,

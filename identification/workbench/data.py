@@ -53,6 +53,7 @@ from servotau.errors import IdentificationError
 
 from ..data import read_table, resolve_roles, segments, shift, table_columns
 from ..data.tables import servotau_joints
+from .resolution import encoder_resolution, quantisation_floor
 
 __all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "Dataset", "align_torque", "cv_window", "describe",
            "faster_derivative", "load_dataset"]
@@ -223,7 +224,7 @@ def load_dataset(
         prep["dq"] = {"source": "log", "column": roles["velocity"]}
     else:
         w = wq
-        sig["dq"] = _differentiate(used["position"], runs, dt, 1, w)[valid]
+        sig["dq"] = differentiate(used["position"], runs, dt, 1, w)[valid]
         how = "chosen by cross-validation on the encoder" if dq_window is None else "given"
         prep["dq"] = {"source": "derivative of q", "window": int(w), "seconds": float(w * dt), "order": 2,
                       "chosen": "cross-validation" if dq_window is None else "given"}
@@ -232,7 +233,7 @@ def load_dataset(
     if "acceleration" not in roles and "position" in roles and dt is not None:
         pos = used["position"]
         w2 = 2 * wq - 1
-        sig["ddq"] = lambda: _differentiate(pos, runs, dt, 2, w2)[valid]
+        sig["ddq"] = lambda: differentiate(pos, runs, dt, 2, w2)[valid]
     if "torque" in roles and smooth_torque_s != 0 and dt is not None:
         if smooth_torque_s is None:
             wt = cv_window(used["torque"], runs, 2)
@@ -241,11 +242,16 @@ def load_dataset(
             wt = _window(smooth_torque_s, dt)
             how = "given"
         sig["tau_raw"] = sig["tau"]  # its noise floor scales the excitation's torque thresholds
-        sig["tau"] = _differentiate(used["torque"], runs, dt, 0, wt)[valid]
+        sig["tau"] = differentiate(used["torque"], runs, dt, 0, wt)[valid]
         prep["tau"] = {"source": "smoothed", "window": int(wt), "seconds": float(wt * dt), "order": 2,
                        "chosen": "cross-validation" if smooth_torque_s is None else "given"}
         notes.append(f"tau: centred Savitzky-Golay smoothing ({wt} samples = {1e3 * wt * dt:.3g} ms, order 2, "
                      f"no delay, {how})")
+    res = encoder_resolution(sig["q"]) if "q" in sig else 0.0
+    if res > 0:
+        prep["q"] = {"source": "log", "resolution": res}
+        notes.append(f"q: quantised to {res:.3g} rad (the encoder's resolution; effects within its rounding error, "
+                     f"{1e6 * quantisation_floor(res):.3g} urad RMS, are not named)")
     if "target" in roles:
         target = used["target"][valid]
     else:
@@ -276,9 +282,9 @@ def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] |
         return None
     runs = ds.signals.runs()
     q = ds.signals["q"]
-    cols = {"dq": _differentiate(q, runs, ds.dt, 1, w)}
+    cols = {"dq": differentiate(q, runs, ds.dt, 1, w)}
     if "ddq_est" not in ds.signals:
-        cols["ddq"] = _differentiate(q, runs, ds.dt, 2, 2 * w - 1)
+        cols["ddq"] = differentiate(q, runs, ds.dt, 2, 2 * w - 1)
     return replace(ds, signals=ds.signals.with_columns(**cols)), w
 
 
@@ -420,14 +426,16 @@ def cv_window(x: np.ndarray, runs: list[tuple[int, int]], order: int = 2, *,
     return max(ok)
 
 
-def _differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window: int) -> np.ndarray:
-    """Centred SG derivative of ``x`` on each run with a ``window`` of samples (order ``deriv + 1``, at
-    least 2); runs shorter than the window use a shorter window."""
+def differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window: int,
+                   order: int | None = None) -> np.ndarray:
+    """Centred SG derivative of ``x`` on each run with a ``window`` of samples (polynomial ``order``, default
+    ``deriv + 1`` and at least 2); runs shorter than the window use a shorter window (finite differences when
+    it leaves no more samples than the order)."""
     from servotau.signal.savgol import savgol_centred
 
     out = np.zeros_like(x)
     w = window if window % 2 else window + 1
-    order = max(2, deriv + 1)
+    order = max(2, deriv + 1) if order is None else order
     for a, b in runs:
         m = b - a
         wr = min(w, m if m % 2 else m - 1)

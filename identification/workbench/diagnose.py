@@ -29,9 +29,10 @@ Verdict:
 
 The workbench never reports its own preprocessing error as a physical effect: when ``dq`` was
 differentiated here (not the log's own), a lag-like effect (family ``dynamics``: delay, motor lag,
-elastic, backlash) that would be named is re-scored with a velocity differentiated over half the window
-(:func:`~.data.faster_derivative`); if its held-out gain then falls below ``min_gain`` it is not named
-but reported untestable, "cannot tell: may be the differentiation's lag", and the next effect is considered.
+elastic, backlash) that would be named is re-scored with less biased velocities (:func:`~.data.derivative_checks`:
+over half the window, and a cubic fit over the same window); if its held-out gain with either falls below
+``min_gain`` it is not named but reported untestable, "cannot tell: may be the differentiation's error", and the
+next effect is considered.
 
 Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
 ranked but never named: they are reported as untestable, not as absent.
@@ -54,11 +55,13 @@ from servotau.actuator.excitation import units_plausible
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
-from .data import Dataset, faster_derivative
+from .checks import derivative_checks
+from .data import Dataset
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, probe_gains
+from .resolution import quantisation_floor
 from .verdict import Candidate, Confusion, Diagnosis, recheck_probes, verdict_of
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
@@ -269,21 +272,21 @@ def diagnose(
             partial=bool(explained is not None and explained < PARTIAL and probe - gain > 0.05),
         ))
     order = lambda c: (not c.testable, -c.heldout_gain if math.isfinite(c.heldout_gain) else math.inf)  # noqa: E731
+    ranking = _within_resolution(ds, ranking, e0, loss, min_gain)
     ranking.sort(key=order)
-    fast = None
+    checks = None
     while ranking and ranking[0].testable and ranking[0].family == "dynamics" \
             and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
         top = ranking[0]
-        fast = fast or faster_derivative(ds) or False
-        if not fast:
+        checks = derivative_checks(ds) if checks is None else checks
+        if not checks:
             break
-        g = _gain_with(fast[0], spec, resolve_effects([top.effect])[0], loss, folds)
+        eff = resolve_effects([top.effect])[0]
+        g, how = min(((_gain_with(d, spec, eff, loss, folds), how) for d, how in checks), key=lambda x: x[0])
         if g >= min_gain:
             break
-        w0 = ds.preprocessing["dq"]["window"]
         ranking[0] = replace(top, testable=False, reason=(
-            f"cannot tell: may be the differentiation's lag (held-out gain {100 * g:.0f} % with dq over "
-            f"{fast[1]} samples instead of {w0})"))
+            f"cannot tell: may be the differentiation's error (held-out gain {100 * g:.0f} % with {how})"))
         ranking.sort(key=order)
     top = ranking[0] if ranking and ranking[0].testable else None
     if top is not None and top.heldout_gain >= min_gain and top.consistent and top.family in probes:
@@ -300,7 +303,51 @@ def diagnose(
         except IdentificationError:
             pass
     probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
-    return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
+    probes, floored = _probes_within_resolution(ds, probes, e0, loss)
+    return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks + floored)
+
+
+def _floor(ds: Dataset, loss: Loss) -> float:
+    """The encoder's rounding error [rad RMS] where it is part of the target (``q_des - q``, least squares), else 0."""
+    if not ds.actuator or loss.kind != "least_squares":
+        return 0.0
+    return quantisation_floor(ds.preprocessing.get("q", {}).get("resolution", 0.0))
+
+
+def _within_resolution(ds: Dataset, ranking: list[Candidate], e0: float, loss: Loss, min_gain: float
+                       ) -> list[Candidate]:
+    """``ranking`` with the effects that would be named but remove no more error than the encoder's rounding
+    (:mod:`.resolution`) made untestable, saying so (least squares only: the errors are RMS)."""
+    floor = _floor(ds, loss)
+    if floor <= 0:
+        return ranking
+    out = []
+    for c in ranking:
+        removed = math.sqrt(max(e0 ** 2 - c.heldout_error ** 2, 0.0)) if c.testable else math.inf
+        if c.testable and c.heldout_gain >= min_gain and removed <= floor:
+            c = replace(c, testable=False, reason=(
+                f"cannot tell: removes {1e6 * removed:.3g} urad RMS, within the encoder's rounding error "
+                f"({1e6 * floor:.3g} urad RMS, resolution {ds.preprocessing['q']['resolution']:.3g} rad)"))
+        out.append(c)
+    return out
+
+
+def _probes_within_resolution(ds: Dataset, probes: dict[str, float], e0: float, loss: Loss
+                              ) -> tuple[dict[str, float], tuple[str, ...]]:
+    """``probes`` with the gains that remove no more error than the encoder's rounding set to 0, and a sentence
+    for each (see :func:`_within_resolution`)."""
+    floor = _floor(ds, loss)
+    if floor <= 0:
+        return probes, ()
+    out, notes = dict(probes), []
+    for k, g in probes.items():
+        removed = e0 * math.sqrt(max(1.0 - (1.0 - g) ** 2, 0.0)) if g > 0 else 0.0
+        if 0 < removed <= floor:
+            out[k] = 0.0
+            if g >= 0.05:
+                notes.append(f"cannot tell: the {k} probe removes {1e6 * removed:.3g} urad RMS ({100 * g:.0f} %), "
+                             f"within the encoder's rounding error ({1e6 * floor:.3g} urad RMS)")
+    return out, tuple(notes)
 
 
 def _gain_with(ds: Dataset, spec: ModelSpec, eff: Effect, loss: Loss, folds: list[Fold]) -> float:

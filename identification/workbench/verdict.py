@@ -3,7 +3,7 @@ verdict (see :mod:`.diagnose`): ``missing_effect``, ``unexplained`` or ``no_miss
 that says why, the experiments that separate look-alike effects, and the residual's tail.
 
 The probes that the workbench's own differentiation can feed (``CHECKED_PROBES``) call a log ``unexplained`` only
-if they survive a faster derivative (:func:`recheck_probes`). A log whose units are doubted or whose joint never
+if they survive less biased derivatives (:func:`recheck_probes`). A log whose units are doubted or whose joint never
 moves (:class:`~servotau.actuator.Excitation`'s ``unit_doubts`` and ``faults``) gets a message that starts
 "cannot tell which effect" (every effect is then untestable).
 """
@@ -20,7 +20,8 @@ from servotau.actuator import EXPERIMENTS, Excitation, get_effect
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
-from .data import Dataset, faster_derivative
+from .checks import derivative_checks
+from .data import Dataset
 from .evaluate import Comparison, error_of
 from .model import FittedModel, ModelSpec, design, fit_spec
 from .probes import MEMORY_HORIZON_S, base_per_fold, memory_candidates, probe_gains
@@ -41,8 +42,8 @@ untestable and the message says why."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
-velocity's window): before they call a log ``unexplained`` they are re-run with the faster derivative
-(:func:`recheck_probes`), and the smaller gain counts."""
+velocity's window): before they call a log ``unexplained`` they are re-run with each less biased derivative
+(:func:`recheck_probes`), and the smallest gain counts."""
 
 
 @dataclass(frozen=True)
@@ -133,7 +134,7 @@ class Diagnosis:
         confusion: The top two effects if they are a documented confusable pair (or nearly tie).
         message: One-paragraph human summary.
         checks: What the checks against the workbench's own preprocessing changed (e.g. a probe re-run with a
-            faster derivative), one sentence each.
+            less biased derivative), one sentence each.
     """
 
     verdict: str
@@ -218,37 +219,38 @@ def _orthogonal_correlation(ds: Dataset, spec: ModelSpec, base: FittedModel, a: 
 def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes: Mapping[str, float],
                    ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...]]:
     """``probes`` with the gains of ``CHECKED_PROBES`` that would call the log ``unexplained`` (no effect named)
-    replaced by the smaller of theirs and the same probe's on a faster derivative (:func:`~.data.faster_derivative`);
+    replaced by the smallest of theirs and the same probe's with each less biased derivative
+    (:func:`~.data.derivative_checks`);
     and a sentence per probe that fell below the threshold. Unchanged when an effect is named, no such probe
     reaches ``PROBE_FACTOR * min_gain`` or the velocity is the log's own."""
     out = dict(probes)
     if any(_nameable(c, min_gain) for c in ranking):
         return out, ()
     todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
-    fast = faster_derivative(ds) if todo else None
-    if fast is None:
+    checks = derivative_checks(ds) if todo else []
+    if not checks:
         return out, ()
-    fds, w = fast
-    cache: dict = {}
-    try:
-        bases = base_per_fold(fds, spec, loss, folds, cache)
-        pred = np.full(fds.n, np.nan)
-        for b in bases:
-            pred[b.fold.test] = b.pred[b.fold.test]
-        e0 = error_of(fds.target - pred, fds.target, loss)
-        model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
-        again = probe_gains(fds, bases, model, loss, e0)
-    except IdentificationError as exc:
-        return out, (f"the check of the {', '.join(todo)} probe with a faster derivative failed: {exc}",)
     notes = []
-    w0 = ds.preprocessing["dq"]["window"]
-    for k in todo:
-        g = again.get(k, 0.0)
-        if g < out[k]:
-            if g < PROBE_FACTOR * min_gain:
-                notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % with dq over "
-                             f"{w} samples instead of {w0}: it may be the differentiation's error")
-            out[k] = g
+    for fds, how in checks:
+        cache: dict = {}
+        try:
+            bases = base_per_fold(fds, spec, loss, folds, cache)
+            pred = np.full(fds.n, np.nan)
+            for b in bases:
+                pred[b.fold.test] = b.pred[b.fold.test]
+            e0 = error_of(fds.target - pred, fds.target, loss)
+            model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
+            again = probe_gains(fds, bases, model, loss, e0)
+        except IdentificationError as exc:
+            notes.append(f"the check of the {', '.join(todo)} probe with {how} failed: {exc}")
+            continue
+        for k in todo:
+            g = again.get(k, 0.0)
+            if g < out[k]:
+                if g < PROBE_FACTOR * min_gain <= out[k]:
+                    notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % with "
+                                 f"{how}: it may be the differentiation's error")
+                out[k] = g
     return out, tuple(notes)
 
 

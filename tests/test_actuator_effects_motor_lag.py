@@ -1,0 +1,36 @@
+"""``motor_lag``: the motor torque lags the servo's command (a first-order current loop)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from servotau.actuator import Signals, get_effect
+from servotau.actuator.signals import lowpass
+from servotau.identification.workbench import diagnose, load_dataset, parse_spec
+
+
+def test_only_the_torque_part_lags():
+    t = np.arange(0.0, 2.0, 1e-3)
+    u_tau, u_v = np.sin(2 * np.pi * t), 0.5 * np.cos(7 * t)
+    s = Signals({"t": t, "tau": u_tau / 1e-3, "u_tau": u_tau, "u_v": u_v, "u": u_tau + u_v}, 1e-3, t.size)
+    col = get_effect("motor_lag").evaluate(s, {"time_constant": 0.01})
+    np.testing.assert_allclose(col, lowpass(u_tau, 0.01, 1e-3) - u_tau)
+
+
+def test_a_lead_is_not_a_motor_lag():
+    eff = get_effect("motor_lag")
+    assert eff.admits(-2.0) and not eff.admits(0.5)
+
+
+def test_a_current_loop_lag_of_an_independent_plant_is_named_with_its_time_constant():
+    """servotau/experiments/plant_family.py (written without the workbench) with a 20 ms current loop: the
+    workbench names motor_lag, and its coefficient gives the time constant (-coefficient x the shape's)."""
+    from servotau.experiments import plant_family as pf
+
+    plant = pf.draw_plant(1004, hidden=("motor_lag",), period=2e-3, duration=12.0)
+    (true,) = pf.simulate([plant], 12.0)
+    ds = load_dataset(dict(pf.measure(plant, true)))
+    d = diagnose(ds, parse_spec("paper", ds.signals))
+    assert d.verdict == "missing_effect" and d.top.effect == "motor_lag"
+    t_fit = -d.top.coefficient * d.top.shape["time_constant"]
+    assert abs(t_fit / plant.effect["motor_lag"]["T"] - 1) < 0.25
