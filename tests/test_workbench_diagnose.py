@@ -245,3 +245,15 @@ def test_runner_up_is_another_effect_when_the_first_ranked_fails_in_too_many_blo
     assert again.message.startswith(f"missing effect: {tested[0].effect}"), again.message
     assert f"runner-up {first.effect} (90 %)" in again.message, again.message
     assert again.top is tested[0] and again.runner_up is first  # what the ladder adds is what the message names
+
+
+def test_the_next_effect_to_add_is_scored_over_the_model_with_the_named_one():
+    """Coulomb friction and a position ripple, diagnosed from the paper's model: the ripple is named; Coulomb,
+    which removes little over the paper's model (the ripple hides it), removes most of the rest once the ripple
+    is in: it is the next to add, with its gain over the model with the ripple."""
+    ds = load_dataset(synthetic_table(cogging_truth))
+    d = diagnose(ds, parse_spec("paper", ds.signals), effects=["coulomb", "stribeck", "cogging", "delay"])
+    assert d.verdict == "missing_effect" and d.top.effect == "cogging", d.message
+    assert d.then is not None and d.then.effect == "coulomb", d.message
+    assert d.then.heldout_gain > 0.5 > d.candidate("coulomb").heldout_gain, d.message
+    assert "coulomb removes a further" in d.message and d.to_dict()["then"]["effect"] == "coulomb"

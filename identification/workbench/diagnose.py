@@ -35,7 +35,13 @@ over half the window, and a cubic fit over the same window); if its held-out gai
 next effect is considered.
 
 Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
-ranked but never named: they are reported as untestable, not as absent.
+ranked but never named: they are reported as untestable, not as absent. Nor is an effect named (or a probe
+counted) that removes no more error than the encoder's rounding (:mod:`.resolution`).
+
+With ``missing_effect``, every other testable effect is scored again over the model with the named one (same
+blocks, checks and floor): the best, if the verdict could name it there, is the next to add
+(:attr:`~.verdict.Diagnosis.then`). Two effects hidden together often rank as the named one and its look-alikes
+over the base model; the second shows once the first is in.
 
 This module ranks the effects; the probes are in :mod:`.probes`, the result types and the verdict in
 :mod:`.verdict`.
@@ -200,6 +206,7 @@ def diagnose(
     min_gain: float = MIN_GAIN,
     cache: dict | None = None,
     progress: Callable[[str], None] | None = None,
+    next_effect: bool = True,
 ) -> Diagnosis:
     """Rank the effects missing from ``spec`` on ``ds`` and give the verdict (see the module doc).
 
@@ -212,6 +219,9 @@ def diagnose(
         min_gain: Smallest held-out gain that names an effect, in (0, 1).
         cache: Column cache shared between calls on the same data.
         progress: Called with a short message per effect.
+        next_effect: With ``missing_effect``, also score every other effect over the model with the named one
+            (:attr:`Diagnosis.then`, about a second grid pass); the greedy ladder, which diagnoses that model
+            next anyway, does not.
     """
     if not 0.0 < min_gain < 1.0:
         raise IdentificationError(f"min_gain = {min_gain!r}: expected a fraction in (0, 1)")
@@ -271,23 +281,9 @@ def diagnose(
             explained=explained,
             partial=bool(explained is not None and explained < PARTIAL and probe - gain > 0.05),
         ))
-    order = lambda c: (not c.testable, -c.heldout_gain if math.isfinite(c.heldout_gain) else math.inf)  # noqa: E731
     ranking = _within_resolution(ds, ranking, e0, loss, min_gain)
-    ranking.sort(key=order)
-    checks = None
-    while ranking and ranking[0].testable and ranking[0].family == "dynamics" \
-            and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
-        top = ranking[0]
-        checks = derivative_checks(ds) if checks is None else checks
-        if not checks:
-            break
-        eff = resolve_effects([top.effect])[0]
-        g, how = min(((_gain_with(d, spec, eff, loss, folds), how) for d, how in checks), key=lambda x: x[0])
-        if g >= min_gain:
-            break
-        ranking[0] = replace(top, testable=False, reason=(
-            f"cannot tell: may be the differentiation's error (held-out gain {100 * g:.0f} % with {how})"))
-        ranking.sort(key=order)
+    ranking.sort(key=_order)
+    ranking = _derivative_checked(ds, spec, ranking, loss, folds, min_gain)
     top = ranking[0] if ranking and ranking[0].testable else None
     if top is not None and top.heldout_gain >= min_gain and top.consistent and top.family in probes:
         try:
@@ -304,7 +300,76 @@ def diagnose(
             pass
     probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
     probes, floored = _probes_within_resolution(ds, probes, e0, loss)
-    return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks + floored)
+    d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks + floored)
+    if d.verdict != "missing_effect" or not next_effect:
+        return d
+    try:
+        then = _then(ds, spec, d.top, ranking, loss, folds, min_gain, cache)
+    except IdentificationError as exc_:
+        log.info("no next effect after %s: %s", d.top.effect, exc_)
+        return d
+    return d if then is None else verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks + floored,
+                                             then)
+
+
+def _order(c: Candidate) -> tuple:
+    """Testable first, then by held-out gain (not-a-number last)."""
+    return not c.testable, -c.heldout_gain if math.isfinite(c.heldout_gain) else math.inf
+
+
+def _derivative_checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss, folds: list[Fold],
+                        min_gain: float) -> list[Candidate]:
+    """``ranking`` (sorted) where each lag-like effect that would come first and be named keeps its place only if
+    it removes ``min_gain`` with every less biased derivative (:func:`~.checks.derivative_checks`); otherwise it is
+    untestable, saying so, and the next one is considered."""
+    checks = None
+    while ranking and ranking[0].testable and ranking[0].family == "dynamics" \
+            and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
+        top = ranking[0]
+        checks = derivative_checks(ds) if checks is None else checks
+        if not checks:
+            break
+        eff = resolve_effects([top.effect])[0]
+        g, how = min(((_gain_with(d, spec, eff, loss, folds), how) for d, how in checks), key=lambda x: x[0])
+        if g >= min_gain:
+            break
+        ranking[0] = replace(top, testable=False, reason=(
+            f"cannot tell: may be the differentiation's error (held-out gain {100 * g:.0f} % with {how})"))
+        ranking.sort(key=_order)
+    return ranking
+
+
+def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate], loss: Loss, folds: list[Fold],
+          min_gain: float, cache: dict) -> Candidate | None:
+    """The effect to add after ``top``: each other testable effect scored over the model with ``top`` (same blocks,
+    nested shape choice, resolution floor and derivative checks); the best if the verdict could name it, else
+    None. Its gains are over the model with ``top``."""
+    y = ds.target
+    with_top = spec.plus(Term(top.effect, top.shape))
+    bases = base_per_fold(ds, with_top, loss, folds, cache)
+    pred0 = np.full(ds.n, np.nan)
+    for b in bases:
+        pred0[b.fold.test] = b.pred[b.fold.test]
+    e0 = error_of(y - pred0, y, loss)
+    e0_folds = _fold_errors(y, pred0, folds, loss)
+    if not e0 > 0:
+        return None
+    out = []
+    for c in ranking:
+        if not c.testable or c.effect == top.effect:
+            continue
+        pred, _ = _score_effect(ds, resolve_effects([c.effect])[0], bases, loss, cache)
+        if np.isnan(pred).any():
+            continue
+        e1 = error_of(y - pred, y, loss)
+        fold_gains = 1.0 - _fold_errors(y, pred, folds, loss) / np.where(e0_folds > 0, e0_folds, 1.0)
+        out.append(replace(c, heldout_gain=1.0 - e1 / e0, heldout_error=e1, fold_gains=tuple(map(float, fold_gains)),
+                           consistent=bool(np.count_nonzero(fold_gains > 0) >= len(folds) - 1), explained=None,
+                           partial=False, remaining=None))
+    out = sorted(_within_resolution(ds, out, e0, loss, min_gain), key=_order)
+    out = _derivative_checked(ds, with_top, out, loss, folds, min_gain)
+    best = out[0] if out else None
+    return best if best is not None and best.testable and best.heldout_gain >= min_gain and best.consistent else None
 
 
 def _floor(ds: Dataset, loss: Loss) -> float:

@@ -152,7 +152,7 @@ def add_effects(
     for step in range(max_steps + 1):
         say(f"step {step}: diagnosing {spec.label()}")
         d = diagnose(ds, spec, loss, effects=_remaining(candidates, spec), folds=folds, min_gain=min_gain,
-                     cache=cache, progress=progress)
+                     cache=cache, progress=progress, next_effect=False)
         diagnoses.append(d)
         if d.verdict != "missing_effect" or step == max_steps:
             break

@@ -135,6 +135,8 @@ class Diagnosis:
         message: One-paragraph human summary.
         checks: What the checks against the workbench's own preprocessing changed (e.g. a probe re-run with a
             less biased derivative), one sentence each.
+        then: With ``missing_effect``, the effect to add next: the best one over the model with the named effect,
+            if the verdict could name it there (its gains are over that model), else None.
     """
 
     verdict: str
@@ -148,6 +150,7 @@ class Diagnosis:
     experiments: Mapping[str, str] = field(default_factory=dict)
     tail_share: float = 0.0
     checks: tuple[str, ...] = ()
+    then: Candidate | None = None
 
     @property
     def top(self) -> Candidate | None:
@@ -189,6 +192,7 @@ class Diagnosis:
             "experiments": dict(self.experiments),
             "tail_share": _r(self.tail_share),
             "checks": list(self.checks),
+            "then": None if self.then is None else self.then.to_dict(),
             "train": self.base.train.to_dict(),
             "heldout": None if self.base.heldout is None else self.base.heldout.to_dict(),
             "excitation": self.excitation.to_dict(),
@@ -254,7 +258,8 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
     return out, tuple(notes)
 
 
-def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str, ...] = ()) -> Diagnosis:
+def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str, ...] = (),
+               then: Candidate | None = None) -> Diagnosis:
     named = [c for c in ranking if _nameable(c, min_gain)]
     experiments = {}
     confusion = None
@@ -290,6 +295,9 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
             message += f"; runner-up {second.effect} ({100 * second.heldout_gain:.0f} %)"
         if confusion is not None:
             message += f"; to separate them: {confusion.experiment}"
+        if then is not None:
+            message += (f"; with {top.effect} in the model, {then.effect} removes a further "
+                        f"{100 * then.heldout_gain:.0f} % (the next to add)")
     else:
         # a function of the present signals says which; the memory probe (any smooth residual) only that some remains
         best_probe = max(((k, v) for k, v in probes.items() if k != "memory"), key=lambda kv: kv[1],
@@ -328,7 +336,7 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
     if exc.faults:
         verdict, message = "cannot_tell", "cannot tell which effect: " + "; ".join(exc.faults) + "; " + message
     return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0],
-                     checks)
+                     checks, then if verdict == "missing_effect" else None)
 
 
 
