@@ -55,7 +55,7 @@ from ..data import read_table, resolve_roles, segments, shift, table_columns
 from ..data.tables import servotau_joints
 
 __all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "Dataset", "align_torque", "cv_window", "describe",
-           "faster_derivative", "load_dataset"]
+           "faster_derivative", "load_dataset", "windows_text"]
 
 log = logging.getLogger(__name__)
 MIN_WINDOW = 5  # [samples] shortest SG window considered by cv_window
@@ -85,7 +85,10 @@ class Dataset:
         notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q"), and what looked wrong
             (jitter, gaps, constant columns, implausible units).
         preprocessing: Per derived signal (``dq``, ``tau``): ``source`` ("log", "derivative of q",
-            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``.
+            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``. A joined log
+            (:func:`~.recordings.combine`) adds ``windows``: per recording ``(first row, window [samples], period
+            [s])``; ``window`` is then the recordings' common window, or the windows as text ("15 and 9",
+            :func:`windows_text`) when they differ ("seconds" only when common).
     """
 
     signals: Signals
@@ -263,23 +266,36 @@ def load_dataset(
                    prep)
 
 
-def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] | None:
+def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int | str] | None:
     """``ds`` with ``dq`` (and ``ddq``) differentiated with ``factor`` times the window (odd, at least
     ``FAST_MIN_WINDOW``: a window of 5 samples shrinks to the central difference), and that window; None when the
-    velocity is the log's own or the window cannot shrink. The check of :func:`~.diagnose.diagnose` that a
-    lag-like effect is not the differentiation's own lag."""
+    velocity is the log's own or no window can shrink. A joined log shrinks each recording's own window (the
+    ``windows`` of its preprocessing; the windows as text when they differ, :func:`windows_text`). The check of
+    :func:`~.diagnose.diagnose` that a lag-like effect is not the differentiation's own lag."""
     info = ds.preprocessing.get("dq", {})
     if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
         return None
-    w = max(FAST_MIN_WINDOW, int(round(factor * info["window"])) | 1)
-    if w >= info["window"]:
+    parts = info.get("windows", ((0, info["window"], ds.dt),))
+    fast = [min(w, max(FAST_MIN_WINDOW, int(round(factor * w)) | 1)) for _, w, _ in parts]
+    if fast == [w for _, w, _ in parts]:
         return None
-    runs = ds.signals.runs()
-    q = ds.signals["q"]
-    cols = {"dq": _differentiate(q, runs, ds.dt, 1, w)}
+    q, runs = ds.signals["q"], ds.signals.runs()
+    ends = [a for a, _, _ in parts[1:]] + [ds.n]
+
+    def per_recording(deriv: int) -> np.ndarray:  # each recording on its own runs, window and period
+        return np.concatenate([_differentiate(q[a:b], [(x - a, y - a) for x, y in runs if a <= x < b], dt, deriv,
+                                              w if deriv == 1 else 2 * w - 1)
+                               for (a, _, dt), b, w in zip(parts, ends, fast, strict=True)])
+
+    cols = {"dq": per_recording(1)}
     if "ddq_est" not in ds.signals:
-        cols["ddq"] = _differentiate(q, runs, ds.dt, 2, 2 * w - 1)
-    return replace(ds, signals=ds.signals.with_columns(**cols)), w
+        cols["ddq"] = per_recording(2)
+    return replace(ds, signals=ds.signals.with_columns(**cols)), fast[0] if len(set(fast)) == 1 else windows_text(fast)
+
+
+def windows_text(windows: list[int]) -> str:
+    """Windows [samples] of the recordings as text: "15 and 9", "15, 9 and 9"."""
+    return str(windows[0]) if len(windows) == 1 else ", ".join(map(str, windows[:-1])) + f" and {windows[-1]}"
 
 
 def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | None,
