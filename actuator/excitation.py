@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .signals import Signals
+from .signals import SG_MIN, Signals
 
 NOISE_MULTIPLE = 3.0
 """Holding still: ``|dq|`` below ``NOISE_MULTIPLE`` velocity noise floors (or ``HOLD_FRACTION`` of the peak)."""
@@ -46,9 +46,6 @@ MAX_ERROR = math.pi  # [rad]
 """Half a turn: a position servo whose error passes it no longer holds a position (a compliant real servo under
 load reaches 1.3 rad: the measured Dynamixel XL330 pendulum logs, tests/data/xl330_pendulum)."""
 MAX_TORQUE = 1e3  # [N m] a torque beyond this is doubted to be in N m (mN m?)
-SG_MIN = 5
-"""[samples] Shortest Savitzky-Golay window of the acceleration (order 3): a shape's window shorter than
-``SG_MIN - 0.5`` periods would be clamped to it, so it is not offered."""
 
 
 @dataclass(frozen=True)
@@ -115,8 +112,9 @@ class Excitation:
 
     @property
     def min_span(self) -> float:
-        """[s] Shortest slow, fast or held motion an effect that needs it accepts (``MIN_SPAN`` samples)."""
-        return MIN_SPAN * (self.period or self.duration / max(self.n_samples, 1))
+        """[s] Shortest slow, fast or held motion an effect that needs it accepts (``MIN_SPAN`` samples); 0 without
+        a period, when the times of motion are 0 too (no span is measured, none is refused)."""
+        return MIN_SPAN * (self.period or 0.0)
 
     def lines(self) -> list[str]:
         """Human-readable summary, one fact per line."""
@@ -299,8 +297,8 @@ def _count_rest_reversals(tau: np.ndarray, hold: np.ndarray, threshold: float) -
 # -- what the sample period resolves -------------------------------------------------------------------
 def shortest(key: str, period: float | None) -> float:
     """[s] Shortest value of the time parameter ``key`` of a shape that a log sampled every ``period`` resolves:
-    ``SG_MIN - 0.5`` periods for an acceleration ``window``, ``RESOLVE_PERIODS`` periods otherwise (0 without
-    a period)."""
+    ``SG_MIN - 0.5`` periods for an acceleration ``window`` (a shorter one would be clamped to
+    :data:`~.signals.SG_MIN` samples), ``RESOLVE_PERIODS`` periods otherwise (0 without a period)."""
     if not period:
         return 0.0
     return (SG_MIN - 0.5) * period if key == "window" else RESOLVE_PERIODS * period
@@ -375,6 +373,14 @@ def fast_motion(e: Excitation) -> str | None:
         return (f"fast motion {e.fast_time:.2g} s (|dq| > {e.v_fast:.2g} rad/s: half the peak {e.v_peak:.2g} "
                 f"rad/s, above the noise floor {e.velocity_noise:.2g} rad/s): expected >= {e.min_span:.2g} s "
                 f"({MIN_SPAN} samples)")
+    return None
+
+
+def slow_motion(e: Excitation) -> str | None:
+    """Slow motion: at least ``MIN_SPAN`` samples between the log's hold and fast thresholds."""
+    if e.slow_time < e.min_span:
+        return (f"slow motion {e.slow_time:.2g} s ({e.v_hold:.2g} to {e.v_fast:.2g} rad/s): expected >= "
+                f"{e.min_span:.2g} s ({MIN_SPAN} samples)")
     return None
 
 

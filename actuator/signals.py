@@ -225,6 +225,9 @@ def hysteresis(x: np.ndarray, on: float, off: float, starts: Sequence[int] | Non
 
 
 # -- helpers shared by several effects -----------------------------------------------------------------
+SG_MIN = 5
+"""[samples] Shortest Savitzky-Golay window of the acceleration (order 3): a window [s] of fewer samples is clamped
+to it (:func:`~.excitation.shortest` offers no shape that would be)."""
 V_EPS = (0.0, 0.005, 0.01, 0.02, 0.05)  # [rad/s] sign smoothing tried by the grids (0: plain sign)
 INERTIA_LAGS = (0.0, 0.002, 0.005)  # [s] delays of the inertia term tried by the grids (that of the torque estimate)
 
@@ -261,7 +264,7 @@ def acceleration(s: Signals, window: float) -> np.ndarray:
     if window <= 0.0:
         return s["ddq"]
     dt = s.require_dt("acceleration")
-    w = max(5, int(round(window / dt)) | 1)
+    w = max(SG_MIN, int(round(window / dt)) | 1)
     if w > s.n:
         return s["ddq"]
     short = any(b - a < w for a, b in s.runs())

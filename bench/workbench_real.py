@@ -264,9 +264,16 @@ def predict_deadband(p: dict, rec: Recording) -> np.ndarray:
 # ---- the workbench -----------------------------------------------------------------------------------------------
 
 
-def dataset(recs: list[Recording]):
-    """The workbench's dataset of ``recs`` (one segment each), read with their role mapping."""
-    return combine([load_dataset(r.columns, roles=r.roles) for r in recs])
+def load(recs: list[Recording]) -> dict:
+    """The workbench's dataset of each recording (read with its role mapping), by name."""
+    return {r.name: load_dataset(r.columns, roles=r.roles) for r in recs}
+
+
+def dataset(recs: list[Recording], loaded: dict | None = None):
+    """The workbench's dataset of ``recs`` (one segment each), joined from ``loaded`` (:func:`load`; read here when
+    None)."""
+    loaded = load(recs) if loaded is None else loaded
+    return combine([loaded[r.name] for r in recs])
 
 
 def verdict_of(d) -> dict:
@@ -277,9 +284,9 @@ def verdict_of(d) -> dict:
             "probes": {k: round(v, 3) for k, v in d.probes.items()}, "message": d.message}
 
 
-def diagnose_recordings(recs: list[Recording]) -> dict:
+def diagnose_recordings(recs: list[Recording], loaded: dict) -> dict:
     """``diagnose`` (paper base) on ``recs`` joined, held out by recording (blocked folds for one recording)."""
-    ds = dataset(recs)
+    ds = dataset(recs, loaded)
     folds = folds_of(ds, len(recs)) if len(recs) > 1 else folds_of(ds)
     return verdict_of(diagnose(ds, parse_spec("paper", ds.signals, offset=not ds.actuator), folds=folds))
 
@@ -287,12 +294,12 @@ def diagnose_recordings(recs: list[Recording]) -> dict:
 M1_TERMS = ("elastic", "coulomb")  # the library's terms for M1's inertia torque and Coulomb friction
 
 
-def workbench_heldout(train: list[Recording], test: Recording, max_steps: int) -> dict:
+def workbench_heldout(train: list[Recording], test: Recording, max_steps: int, loaded: dict) -> dict:
     """The greedy ladder fitted on ``train``, its base and final models scored on ``test``."""
-    ds = dataset(train)
+    ds = dataset(train, loaded)
     spec = parse_spec("paper", ds.signals, offset=not ds.actuator)
     ladder = add_effects(ds, spec, max_steps=max_steps, folds=folds_of(ds, max(len(train), 2)))
-    ts = load_dataset(test.columns, roles=test.roles)
+    ts = loaded[test.name]
     base = ladder.rungs[0].comparison.model
     final = ladder.final
     named = add_effects(ds, spec, effects=M1_TERMS, folds=folds_of(ds, max(len(train), 2)), diagnose_final=False)
@@ -307,12 +314,12 @@ def workbench_heldout(train: list[Recording], test: Recording, max_steps: int) -
 JOIN_GUARD = 8  # [samples] each side of a join between two training recordings left out by join_check
 
 
-def join_check(train: list[Recording], test: Recording) -> dict:
+def join_check(train: list[Recording], test: Recording, loaded: dict) -> dict:
     """The workbench's own columns for M1 (k_tau, k_v, elastic at the baselines' window, plain-sign coulomb), solved
     by plain least squares on the joined training recordings with and without the samples next to each join, and
     scored on ``test``: the effects filter ``q`` across the join of two recordings (their acceleration spikes there)."""
-    ds = dataset(train)
-    ts = load_dataset(test.columns, roles=test.roles)
+    ds = dataset(train, loaded)
+    ts = loaded[test.name]
     window = DDQ_WINDOW * float(np.median(np.diff(test.columns["t_s"])))
     spec = parse_spec("paper", ds.signals).plus(Term("elastic", {"window": window, "lag": 0.0})).plus(
         Term("coulomb", {"v_eps": 0.0}))
@@ -331,12 +338,13 @@ def join_check(train: list[Recording], test: Recording) -> dict:
 def run_group(g: Group, max_steps: int, published_models: dict, say) -> dict:
     rows = []
     recs = list(g.recordings)
+    loaded = load(recs)  # each recording read once, for every fit, score and diagnosis below
     for i, held in enumerate(recs):
         train = recs[:i] + recs[i + 1:]
         say(f"{g.dataset}/{g.name}: held out {held.name}")
         row = {"heldout": held.name, "train": [r.name for r in train], "n": len(held.target),
                "target_rms": float(np.sqrt(np.mean(held.target ** 2))),
-               "workbench": workbench_heldout(train, held, max_steps)}
+               "workbench": workbench_heldout(train, held, max_steps, loaded)}
         base = {}
         if g.dataset == "xl330_pendulum":
             m1 = fit_m1(train)
@@ -354,12 +362,12 @@ def run_group(g: Group, max_steps: int, published_models: dict, say) -> dict:
             base["dead band (backlash)"] = scores(held.target, predict_deadband(p, held)) | {
                 "play_rad": 2 * p["sign_load"], "k_rad_per_load": p["load"]}
         row["baselines"] = base
-        row["join_check"] = join_check(train, held)
-        row["diagnose"] = diagnose_recordings([held])
+        row["join_check"] = join_check(train, held, loaded)
+        row["diagnose"] = diagnose_recordings([held], loaded)
         rows.append(row)
     say(f"{g.dataset}/{g.name}: diagnose on all recordings (leave-one-recording-out)")
     return {"dataset": g.dataset, "group": g.name, "kp": g.kp, "recordings": [r.name for r in recs],
-            "rows": rows, "diagnose_all": diagnose_recordings(recs)}
+            "rows": rows, "diagnose_all": diagnose_recordings(recs, loaded)}
 
 
 def published_xl330() -> dict:

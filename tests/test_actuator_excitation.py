@@ -54,6 +54,24 @@ def test_fast_motion_reason_names_measured_and_needed():
     assert reason is not None and "fast motion" in reason and "expected >=" in reason and "50 samples" in reason
 
 
+def test_slow_and_fast_spans_are_samples_of_the_log_for_every_friction_effect():
+    """stribeck, lugre and viscous_power need MIN_SPAN samples of slow (and fast) motion: 0.3 s of slow motion
+    is too little at 16 ms (19 samples) and enough at 1 ms (300); the reason names the measured and needed spans."""
+    from dataclasses import replace
+
+    from servotau.actuator.excitation import MIN_SPAN
+
+    e = excitation_report(_friction_log())
+    for period, ok in ((1e-3, True), (16e-3, False)):
+        short = replace(e, period=period, slow_time=0.3, fast_time=0.3)
+        assert short.min_span == MIN_SPAN * period
+        for name in ("stribeck", "lugre", "viscous_power"):
+            reason = get_effect(name).needs(short)
+            assert (reason is None) == ok, (name, period, reason)
+            if not ok:
+                assert "slow motion 0.3 s" in reason and "expected >= 0.8 s (50 samples)" in reason, name
+
+
 def test_lag_shapes_need_the_sample_period_to_resolve_them():
     for name in ("delay", "motor_lag", "elastic", "backlash"):
         grid = get_effect(name).grid

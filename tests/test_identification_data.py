@@ -51,6 +51,22 @@ def test_shift_fills_with_nan_or_holds_the_edges():
         shift(x, 1, fill="zero")
 
 
+def test_shift_past_a_short_run_keeps_its_length():
+    """A run shorter than the shift (align_torque shifts each run of a log) is all NaN or all its edge value."""
+    from servotau.actuator.signals import per_run
+
+    x = np.arange(3.0)
+    for k in (3, 7, -3, -7):
+        assert np.isnan(shift(x, k)).all() and len(shift(x, k)) == 3
+    np.testing.assert_array_equal(shift(x, 7, fill="hold"), [2, 2, 2])
+    np.testing.assert_array_equal(shift(x, -7, fill="hold"), [0, 0, 0])
+    np.testing.assert_array_equal(shift(x, 3, fill="hold"), [2, 2, 2])
+    np.testing.assert_array_equal(shift(np.arange(6.0).reshape(3, 2), -4, fill="hold"), [[0, 1]] * 3)
+    assert shift(np.empty(0), 2, fill="hold").shape == (0,)
+    runs = per_run(lambda v: shift(v, 3, fill="hold"), (0, 2), np.arange(8.0))
+    np.testing.assert_array_equal(runs, [1, 1, 5, 6, 7, 7, 7, 7])
+
+
 def test_holdout_split_holds_out_every_nth_time_block_then_downsamples_each_set():
     t = 0.5 + np.arange(9000) * 1e-3  # 9 s from 0.5 s: blocks counted from t[0]
     valid = np.ones(len(t), bool)

@@ -85,6 +85,27 @@ def test_lag_that_does_not_survive_a_less_biased_derivative_is_not_named():
     assert "differentiation's error" in reasons["delay"]
 
 
+def test_the_faster_derivative_check_runs_on_a_joined_log():
+    """The clean log of the lag test above, cut in two recordings and joined (``model diagnose a.csv b.csv``): each
+    half chooses its own window, the check differentiates each with half of it, and `delay` is not named (without
+    the check it was, at 19 %)."""
+    from servotau.experiments import plant_family as pf
+    from servotau.identification.workbench.checks import faster_derivative
+    from servotau.identification.workbench.recordings import combine
+
+    plant = pf.draw_plant(0, hidden=(), period=1e-3, duration=8.0)
+    (true,) = pf.simulate([plant], 8.0)
+    log = pf.measure(plant, true)
+    half = len(log["t"]) // 2
+    ds = combine([load_dataset({k: v[:half] for k, v in log.items()}), load_dataset({k: v[half:] for k, v in
+                                                                                      log.items()})])
+    assert len(ds.preprocessing["dq"]["windows"]) == 2 and faster_derivative(ds) is not None
+    d = diagnose(ds, parse_spec("paper", ds.signals))
+    assert d.verdict != "missing_effect"
+    reason = next(c.reason for c in d.ranking if c.effect == "delay")
+    assert "differentiation's error" in reason and f"{ds.preprocessing['dq']['window']}" in reason
+
+
 def test_true_delay_survives_the_less_biased_derivatives():
     _plant, _ds, d = _plant_diagnosis(3, ("delay",))
     assert d.verdict == "missing_effect" and d.ranking[0].effect == "delay"
@@ -94,7 +115,7 @@ def test_log_velocity_skips_the_faster_derivative_check():
     cols = _log(1e-3, 1e-5, with_dq=True)
     ds = load_dataset(cols)
     assert ds.preprocessing["dq"] == {"source": "log", "column": "dq"}
-    from servotau.identification.workbench.data import faster_derivative
+    from servotau.identification.workbench.checks import faster_derivative
 
     assert faster_derivative(ds) is None
 
@@ -102,7 +123,7 @@ def test_log_velocity_skips_the_faster_derivative_check():
 def test_faster_derivative_runs_when_the_window_is_already_five_samples():
     """At 7-16 ms the chosen window is often the shortest (5 samples): the check falls back to the central
     difference (3 samples) instead of not running."""
-    from servotau.identification.workbench.data import faster_derivative
+    from servotau.identification.workbench.checks import faster_derivative
 
     ds = load_dataset(_log(10e-3, 1e-5, duration=40.0), dq_window=5)
     fast = faster_derivative(ds)

@@ -8,19 +8,21 @@ import pytest
 
 from servotau.actuator import builtin_effects
 from servotau.identification.workbench import load_dataset
+from servotau.identification.workbench.checks import faster_derivative
 from servotau.identification.workbench.recordings import combine
 
 DT = 2e-3  # [s]
 
 
-def _log(seed: int, n: int, t0: float = 0.0) -> dict[str, np.ndarray]:
-    """A servo log: a random smooth command, the joint following it with an error that grows with the torque."""
+def _log(seed: int, n: int, t0: float = 0.0, noise: float = 2e-5) -> dict[str, np.ndarray]:
+    """A servo log: a random smooth command, the joint following it with an error that grows with the torque;
+    encoder noise ``noise`` [rad]."""
     rng = np.random.default_rng(seed)
     t = t0 + np.arange(n) * DT
     f = rng.uniform(0.3, 1.5, 3)
     q_des = sum(rng.uniform(0.1, 0.4) * np.sin(2 * np.pi * fk * t + rng.uniform(0, 6)) for fk in f)
     tau = 20.0 * np.gradient(np.gradient(q_des, DT), DT) * 0.05 + 3.0 * np.sin(q_des)
-    q = q_des - 1e-3 * tau - 2e-3 * np.gradient(q_des, DT) + rng.normal(0, 2e-5, n)
+    q = q_des - 1e-3 * tau - 2e-3 * np.gradient(q_des, DT) + rng.normal(0, noise, n)
     return {"t": t, "q": q, "q_des": q_des, "tau": tau + rng.normal(0, 0.05, n)}
 
 
@@ -100,3 +102,39 @@ def test_the_dynamics_probe_reads_no_sample_of_another_recording():
     joined = probe_columns(ds.signals, ds.target, "dynamics")["dynamics"]
     alone = [probe_columns(p.signals, p.target, "dynamics")["dynamics"] for p in parts]
     np.testing.assert_allclose(joined, np.vstack(alone), rtol=1e-12, atol=1e-15)
+
+
+def test_a_joined_log_differentiates_each_recording_faster_with_half_its_own_window():
+    """Two recordings with different encoder noise choose different velocity windows; the joined log keeps each
+    (its preprocessing and notes say both), and its faster derivative is each recording's own, row for row."""
+    parts = [load_dataset(_log(6, 1500, noise=1e-6)), load_dataset(_log(7, 1200, noise=3e-4))]
+    windows = [p.preprocessing["dq"]["window"] for p in parts]
+    assert windows[0] < windows[1]
+    ds = combine(parts)
+    dq = ds.preprocessing["dq"]
+    assert dq["source"] == "derivative of q" and dq["window"] == f"{windows[0]} and {windows[1]}"
+    assert [(a, w) for a, w, _dt in dq["windows"]] == [(0, windows[0]), (1500, windows[1])]
+    assert any(f"own window: {windows[0]} and {windows[1]} samples" in n for n in ds.notes)
+    fast, w = faster_derivative(ds)
+    alone = [faster_derivative(p) for p in parts]
+    assert w == f"{alone[0][1]} and {alone[1][1]}" and alone[0][1] < windows[0] and alone[1][1] < windows[1]
+    for col in ("dq", "ddq"):
+        np.testing.assert_array_equal(fast.signals[col], np.concatenate([a[0].signals[col] for a in alone]), col)
+
+
+def test_a_joined_log_with_one_window_keeps_it_and_the_log_velocity_is_never_redifferentiated():
+    opts = {"dq_window": 9, "smooth_torque_s": 0.014}
+    ds = combine([load_dataset(_log(8, 900), **opts), load_dataset(_log(9, 800), **opts)])
+    assert ds.preprocessing["dq"]["window"] == 9
+    assert [(a, w) for a, w, _dt in ds.preprocessing["dq"]["windows"]] == [(0, 9), (900, 9)]
+    assert ds.preprocessing["tau"]["window"] == 7 and ds.preprocessing["tau"]["source"] == "smoothed"
+    assert faster_derivative(ds)[1] == 5
+    with_dq = [load_dataset({**c, "dq": np.gradient(c["q"], DT)}) for c in (_log(8, 900), _log(9, 800))]
+    joined = combine(with_dq)
+    assert joined.preprocessing["dq"] == {"source": "log", "column": "dq"} and faster_derivative(joined) is None
+
+
+def test_a_signal_derived_in_some_recordings_only_is_said_and_not_checked():
+    ds = combine([load_dataset(_log(8, 900)), load_dataset(_log(9, 800), smooth_torque_s=0)])
+    assert ds.preprocessing["tau"] == {"source": "mixed", "sources": ("smoothed", "not derived")}
+    assert any(n.startswith("tau: the recordings differ: 0: smoothed, 1: not derived") for n in ds.notes)

@@ -18,7 +18,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation
+from ..excitation import Excitation, slow_motion
 from ..friction_state import FRICTION_COEFFICIENT, OnlineState, state, x0_grid
 from ..registry import Effect
 from ..signals import Signals
@@ -60,9 +60,8 @@ def needs(e: Excitation) -> str | None:
     if e.velocity_reversals < 2:
         return (f"only {e.velocity_reversals} velocity reversals: expected >= 2 (the bristle state is set at each "
                 "reversal; best: small back-and-forth moves)")
-    if e.slow_time < 0.5:
-        return f"slow motion {e.slow_time:.1f} s: expected >= 0.5 s (the Stribeck steady state needs slow speeds)"
-    return None
+    slow = slow_motion(e)
+    return f"{slow} (the Stribeck steady state needs slow speeds)" if slow else None
 
 
 EFFECT = Effect(

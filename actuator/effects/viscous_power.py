@@ -15,7 +15,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation, both_directions
+from ..excitation import Excitation, both_directions, slow_and_fast
 from ..friction_state import FRICTION_COEFFICIENT
 from ..registry import Effect
 from ..signals import Signals
@@ -38,10 +38,8 @@ def scalar(x: Mapping[str, float], delta: float) -> float:
 
 def needs(e: Excitation) -> str | None:
     """Several speeds (the exponent is the curvature of friction against speed), in both directions."""
-    if e.slow_time < 0.5 or e.fast_time < 0.5:
-        return (f"slow motion {e.slow_time:.1f} s, fast motion {e.fast_time:.1f} s: expected >= 0.5 s of each "
-                "(the power of the speed needs several speeds)")
-    return both_directions(e)
+    speeds = slow_and_fast(e)
+    return f"{speeds} (the power of the speed needs several speeds)" if speeds else both_directions(e)
 
 
 EFFECT = Effect(

@@ -67,9 +67,10 @@ def shift(x: np.ndarray, k: int, fill: Literal["nan", "hold"] = "nan") -> np.nda
     if k == 0:
         return x.copy()
     if fill == "hold":
+        m = min(abs(k), len(x))  # a shift past the whole array holds the edge value everywhere
         if k > 0:
-            return np.concatenate([x[k:], np.repeat(x[-1:], k, axis=0)])
-        return np.concatenate([np.repeat(x[:1], -k, axis=0), x[:k]])
+            return np.concatenate([x[m:], np.repeat(x[-1:], m, axis=0)])
+        return np.concatenate([np.repeat(x[:1], m, axis=0), x[:len(x) - m]])
     out = np.full_like(x, np.nan)
     if k > 0:
         out[:-k] = x[k:]

@@ -11,11 +11,56 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .data import Dataset, differentiate, faster_derivative
+import numpy as np
 
-__all__ = ["CHECK_ORDER", "derivative_checks"]
+from .data import Dataset, differentiate, windows_text
+
+__all__ = ["CHECK_ORDER", "derivative_checks", "faster_derivative", "recording_windows", "with_derivatives"]
 
 CHECK_ORDER = 4  # polynomial order of the cubic check (a first derivative's coefficients agree for orders 3 and 4)
+FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 over 3 samples: the central difference)
+
+
+def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int | str] | None:
+    """``ds`` with ``dq`` (and ``ddq``) differentiated with ``factor`` times the window (odd, at least
+    ``FAST_MIN_WINDOW``: a window of 5 samples shrinks to the central difference), and that window; None when the
+    velocity is the log's own or no window can shrink. A joined log shrinks each recording's own window (the
+    ``windows`` of its preprocessing; the windows as text when they differ, :func:`windows_text`). The check of
+    :func:`~.diagnose.diagnose` that a lag-like effect is not the differentiation's own lag."""
+    info = ds.preprocessing.get("dq", {})
+    if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
+        return None
+    parts = recording_windows(ds)
+    fast = [min(w, max(FAST_MIN_WINDOW, int(round(factor * w)) | 1)) for _, w, _ in parts]
+    if fast == [w for _, w, _ in parts]:
+        return None
+    return with_derivatives(ds, fast), fast[0] if len(set(fast)) == 1 else windows_text(fast)
+
+
+def recording_windows(ds: Dataset) -> list[tuple[int, int, float]]:
+    """``(first row, dq window [samples], sample period [s])`` of each recording of ``ds`` whose velocity was
+    differentiated here (one entry for a single log)."""
+    info = ds.preprocessing["dq"]
+    return list(info.get("windows", ((0, info["window"], ds.dt),)))
+
+
+def with_derivatives(ds: Dataset, windows: list[int], order: int | None = None) -> Dataset:
+    """``ds`` with ``dq`` (and ``ddq``, unless the log has its own) differentiated again from ``q``, each recording
+    on its own runs and period with its window of ``windows`` (``ddq`` over twice it), of polynomial ``order``
+    (default as :func:`differentiate`)."""
+    parts = recording_windows(ds)
+    q, runs = ds.signals["q"], ds.signals.runs()
+    ends = [a for a, _, _ in parts[1:]] + [ds.n]
+
+    def per_recording(deriv: int) -> np.ndarray:
+        return np.concatenate([differentiate(q[a:b], [(x - a, y - a) for x, y in runs if a <= x < b], dt, deriv,
+                                             w if deriv == 1 else 2 * w - 1, order=order)
+                               for (a, _, dt), b, w in zip(parts, ends, windows, strict=True)])
+
+    cols = {"dq": per_recording(1)}
+    if "ddq_est" not in ds.signals:
+        cols["ddq"] = per_recording(2)
+    return replace(ds, signals=ds.signals.with_columns(**cols))
 
 
 def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:
@@ -33,10 +78,6 @@ def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:
     fast = faster_derivative(ds)
     if fast is not None:
         out.append((fast[0], f"dq over {fast[1]} samples instead of {w0}"))
-    runs, q = ds.signals.runs(), ds.signals["q"]
-    cols = {"dq": differentiate(q, runs, ds.dt, 1, w0, order=CHECK_ORDER)}
-    if "ddq_est" not in ds.signals:
-        cols["ddq"] = differentiate(q, runs, ds.dt, 2, 2 * w0 - 1, order=CHECK_ORDER)
-    out.append((replace(ds, signals=ds.signals.with_columns(**cols)),
+    out.append((with_derivatives(ds, [w for _, w, _ in recording_windows(ds)], order=CHECK_ORDER),
                 f"dq by a cubic fit over the same {w0} samples"))
     return out

@@ -56,11 +56,10 @@ from ..data.tables import servotau_joints
 from .resolution import encoder_resolution, quantisation_floor
 
 __all__ = ["MIN_SAMPLES", "MIN_WINDOW", "OFFLINE_ESTIMATE", "Dataset", "align_torque", "cv_window", "describe",
-           "faster_derivative", "load_dataset"]
+           "load_dataset", "windows_text"]
 
 log = logging.getLogger(__name__)
 MIN_WINDOW = 5  # [samples] shortest SG window considered by cv_window
-FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 over 3 samples: the central difference)
 MAX_WINDOW = 101  # [samples] longest SG window considered by cv_window
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
@@ -86,7 +85,10 @@ class Dataset:
         notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q"), and what looked wrong
             (jitter, gaps, constant columns, implausible units).
         preprocessing: Per derived signal (``dq``, ``tau``): ``source`` ("log", "derivative of q",
-            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``.
+            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``. A joined log
+            (:func:`~.recordings.combine`) adds ``windows``: per recording ``(first row, window [samples], period
+            [s])``; ``window`` is then the recordings' common window, or the windows as text ("15 and 9",
+            :func:`windows_text`) when they differ ("seconds" only when common).
     """
 
     signals: Signals
@@ -269,23 +271,9 @@ def load_dataset(
                    prep)
 
 
-def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int] | None:
-    """``ds`` with ``dq`` (and ``ddq``) differentiated with ``factor`` times the window (odd, at least
-    ``FAST_MIN_WINDOW``: a window of 5 samples shrinks to the central difference), and that window; None when the
-    velocity is the log's own or the window cannot shrink. The check of :func:`~.diagnose.diagnose` that a
-    lag-like effect is not the differentiation's own lag."""
-    info = ds.preprocessing.get("dq", {})
-    if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
-        return None
-    w = max(FAST_MIN_WINDOW, int(round(factor * info["window"])) | 1)
-    if w >= info["window"]:
-        return None
-    runs = ds.signals.runs()
-    q = ds.signals["q"]
-    cols = {"dq": differentiate(q, runs, ds.dt, 1, w)}
-    if "ddq_est" not in ds.signals:
-        cols["ddq"] = differentiate(q, runs, ds.dt, 2, 2 * w - 1)
-    return replace(ds, signals=ds.signals.with_columns(**cols)), w
+def windows_text(windows: list[int]) -> str:
+    """Windows [samples] of the recordings as text: "15 and 9", "15, 9 and 9"."""
+    return str(windows[0]) if len(windows) == 1 else ", ".join(map(str, windows[:-1])) + f" and {windows[-1]}"
 
 
 def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | None,

@@ -5,6 +5,12 @@ the signals they all have, end to end (time continued one sample period after th
 end), ``segment`` = the recording's index (0, 1, ...), the cross-validation's blocks. Each recording's runs
 (:attr:`~servotau.actuator.signals.Signals.starts`: its first sample, and any gap inside it) stay runs of the
 joined signals, so the effects' filters restart at every join and never read another recording's samples.
+
+The joined :attr:`~.data.Dataset.preprocessing` says, per derived signal, what every recording did: its ``windows``
+(per recording: first row, window, period) let :func:`~.checks.faster_derivative` differentiate each recording with
+half its own window, as it would alone. Recordings whose windows differ get a note naming each; a signal derived
+in some recordings and not in others (``source`` "mixed") gets a note, and the faster-derivative check does not
+run on a mixed velocity (half of no window is no check).
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ import numpy as np
 from servotau.actuator import Signals
 from servotau.errors import IdentificationError
 
-from .data import Dataset
+from .data import Dataset, windows_text
 
 __all__ = ["combine"]
 
@@ -62,6 +68,32 @@ def combine(datasets: Sequence[Dataset]) -> Dataset:
     notes = [f"{len(datasets)} recordings, one segment each (held out: leave-one-recording-out): "
              + ", ".join(f"{i}={d.source}" for i, d in enumerate(datasets))]
     notes += [f"{d.source}: {x}" for d in datasets for x in d.notes]
+    prep = _preprocessing(datasets, offsets, notes)
     return Dataset(Signals(cols, first.dt, n, starts=starts), np.concatenate([d.target for d in datasets]), segment,
                    first.roles, " + ".join(d.source for d in datasets), first.joint, sum(d.n_dropped for d in datasets),
-                   tuple(notes))
+                   tuple(notes), prep)
+
+
+def _preprocessing(datasets: Sequence[Dataset], offsets, notes: list[str]) -> dict[str, dict]:
+    """The joined preprocessing (module doc): per signal, what the recordings share, and the ``windows`` of those
+    filtered; a note (added to ``notes``) when their windows differ or only some derived the signal."""
+    out: dict[str, dict] = {}
+    for key in dict.fromkeys(k for d in datasets for k in d.preprocessing):
+        infos = [d.preprocessing.get(key, {}) for d in datasets]
+        sources = [i.get("source", "not derived") for i in infos]
+        if len(set(sources)) > 1:
+            out[key] = {"source": "mixed", "sources": tuple(sources)}
+            notes.append(f"{key}: the recordings differ: " + ", ".join(f"{i}: {s}" for i, s in enumerate(sources))
+                         + (" (no faster-derivative check)" if key == "dq" else ""))
+            continue
+        out[key] = {k: v for k, v in infos[0].items() if all(i.get(k) == v for i in infos)}
+        if "window" not in infos[0]:
+            continue
+        windows = [int(i["window"]) for i in infos]
+        out[key]["windows"] = tuple((int(o), w, float(d.dt)) for o, w, d in zip(offsets, windows, datasets,
+                                                                                 strict=True))
+        if len(set(windows)) > 1:
+            out[key]["window"] = windows_text(windows)
+            notes.append(f"{key}: each recording filtered with its own window: {windows_text(windows)} samples "
+                         f"(recordings {windows_text(list(range(len(datasets))))})")
+    return out

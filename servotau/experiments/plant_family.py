@@ -195,7 +195,11 @@ def simulate(plants: list[Plant], duration: float = DURATION, *, dt: float = DT)
     t_fine = np.arange(steps) * dt
     delay = _col(plants, "delay", "d")
     cmd_log = np.stack([command_of(p.command, o, t_fine) for p, o in zip(plants, offset, strict=True)])
-    cmd_srv = np.stack([command_of(p.command, o, t_fine - d) for p, o, d in zip(plants, offset, delay, strict=True)])
+    cmd_srv = cmd_log  # what the servo tracks: the logged command, delayed for the plants with a delay
+    if np.any(delay > 0):
+        cmd_srv = cmd_log.copy()
+        for k in np.flatnonzero(delay > 0):
+            cmd_srv[k] = command_of(plants[k].command, offset[k], t_fine - delay[k])
     # effects, as per-plant coefficients (zero when absent)
     fc = _col(plants, "coulomb", "fc") + _col(plants, "stribeck", "fc")
     fc_pos, fc_neg = _col(plants, "coulomb_asym", "fc_pos"), _col(plants, "coulomb_asym", "fc_neg")

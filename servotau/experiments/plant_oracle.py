@@ -31,7 +31,7 @@ candidate column errs toward calling an effect detectable, i.e. toward blaming t
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -50,22 +50,27 @@ def alone(plant: Plant, effect: str) -> Plant:
     return replace(plant, hidden=(effect,), effect={effect: plant.effect[effect]})
 
 
-def effect_residuals(plants: list[Plant], trues: list[dict]) -> list[dict[str, list[np.ndarray]]]:
+def singles(plants: list[Plant]) -> list[tuple[int, str, Plant]]:
+    """``(index, effect, plant with that effect alone)`` for each effect of each pair among ``plants``."""
+    return [(i, e, alone(p, e)) for i, p in enumerate(plants) if len(p.hidden) > 1 for e in p.hidden]
+
+
+def effect_residuals(plants: list[Plant], trues: list[dict],
+                     alone_trues: list[dict] | None = None) -> list[dict[str, list[np.ndarray]]]:
     """Per plant, ``{effect: [r, ...]}``: the candidate oracle columns of each hidden effect, and ``"all"``: the
     plant's own ``r``. A single effect's is the plant's ``r``; each effect ``e`` of a pair gets two, from the plant
-    simulated with each effect alone (here, in one batch): ``r`` of ``e`` alone, and the pair's ``r`` less that of
-    the other effect alone (the interaction of the two attributed to ``e``)."""
+    simulated with each effect alone (``alone_trues``: :func:`simulate` of :func:`singles`' plants, in one batch;
+    simulated here when None): ``r`` of ``e`` alone, and the pair's ``r`` less that of the other effect alone (the
+    interaction of the two attributed to ``e``)."""
     out: list[dict[str, list[np.ndarray]]] = []
-    singles: list[tuple[int, str, Plant]] = []
-    for i, (p, tr) in enumerate(zip(plants, trues, strict=True)):
+    for p, tr in zip(plants, trues, strict=True):
         r = servo_residual(p, tr)
         out.append({"all": [r], **({p.hidden[0]: [r]} if len(p.hidden) == 1 else {})})
-        if len(p.hidden) > 1:
-            singles += [(i, e, alone(p, e)) for e in p.hidden]
-    if singles:
-        duration = len(trues[0]["t"]) * RECORD
-        own = {(i, e): servo_residual(p, tr)
-               for (i, e, p), tr in zip(singles, simulate([s[2] for s in singles], duration), strict=True)}
+    pairs = singles(plants)
+    if pairs:
+        if alone_trues is None:
+            alone_trues = simulate([s[2] for s in pairs], len(trues[0]["t"]) * RECORD)
+        own = {(i, e): servo_residual(p, tr) for (i, e, p), tr in zip(pairs, alone_trues, strict=True)}
         for (i, e), r_e in own.items():
             others = [r for (j, f), r in own.items() if j == i and f != e]
             out[i][e] = [r_e, out[i]["all"][0] - sum(others)]
@@ -83,19 +88,40 @@ def _heldout_rms(x: np.ndarray, y: np.ndarray, folds) -> float:
     return float(np.sqrt(np.mean((y[ok] - pred[ok]) ** 2)))
 
 
-def oracle_gain(ds, t_true: np.ndarray, rs: list[np.ndarray]) -> float:
-    """Held-out gain over the paper model of the best oracle column of ``rs`` (each on the time grid ``t_true``
-    [s]), on the workbench dataset ``ds`` of the measured log (``r`` is read at the dataset's own times, so
-    dropped or resampled rows stay aligned)."""
+@dataclass(frozen=True)
+class PaperFit:
+    """The paper model on one workbench dataset, shared by every oracle column of the log.
+
+    Attributes:
+        columns: The dataset's ``tau`` [N m] and ``dq`` [rad/s], side by side.
+        folds: The workbench's blocked folds of the dataset.
+        error: The paper model's pooled held-out RMS error [rad].
+    """
+
+    columns: np.ndarray
+    folds: list
+    error: float
+
+
+def paper_fit(ds) -> PaperFit:
+    """The paper model's held-out error on ``ds``: the denominator of every :func:`oracle_gain` of the log."""
     from servotau.identification.data import folds_of
 
-    base = np.column_stack([ds.signals["tau"], ds.signals["dq"]])
+    columns = np.column_stack([ds.signals["tau"], ds.signals["dq"]])
     folds = folds_of(ds)
-    e0 = _heldout_rms(base, ds.target, folds)
-    if not e0 > 0:
+    return PaperFit(columns, folds, _heldout_rms(columns, ds.target, folds))
+
+
+def oracle_gain(ds, t_true: np.ndarray, rs: list[np.ndarray], base: PaperFit | None = None) -> float:
+    """Held-out gain over the paper model of the best oracle column of ``rs`` (each on the time grid ``t_true``
+    [s]), on the workbench dataset ``ds`` of the measured log (``r`` is read at the dataset's own times, so
+    dropped or resampled rows stay aligned); ``base``: :func:`paper_fit` of ``ds``, computed here when None."""
+    base = paper_fit(ds) if base is None else base
+    if not base.error > 0:
         return 0.0
     cols = [np.interp(ds.signals["t"], t_true, r) for r in rs]
     pre = ds.preprocessing.get("tau", {})
     if pre.get("source") == "smoothed" and pre.get("window", 0) > pre.get("order", 2) + 1:
         cols += [savgol_filter(c, int(pre["window"]), int(pre.get("order", 2))) for c in cols]
-    return max(1.0 - _heldout_rms(np.column_stack([base, c]), ds.target, folds) / e0 for c in cols)
+    return max(1.0 - _heldout_rms(np.column_stack([base.columns, c]), ds.target, base.folds) / base.error
+               for c in cols)

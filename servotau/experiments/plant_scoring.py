@@ -24,13 +24,14 @@ from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
 
 from .plant_family import EFFECTS, draw_plant, measure, simulate
-from .plant_oracle import effect_residuals, oracle_gain
+from .plant_oracle import effect_residuals, oracle_gain, paper_fit, singles
 
 # The workbench's names that count as finding each hidden effect: its own name; for the power-law viscous friction
 # any name that mentions viscous or power (the library's is viscous_power; a user's variant counts too).
 ACCEPT: dict[str, tuple[str, ...]] = {e: (e,) for e in EFFECTS}
 BANDS = ((1, 2, "1-2 ms"), (3, 6, "3-6 ms"), (7, 16, "7-16 ms"))
 SPLIT = 50  # seeds below: tuning part; at or above: held-out part
+BATCH = 32  # plants simulated side by side
 
 
 def accepted(hidden: str, name: str | None) -> bool:
@@ -52,13 +53,12 @@ def part_of(seed: int, split: int = SPLIT) -> str:
     return "tuning" if seed < split else "held_out"
 
 
-def diagnose_log(log: dict) -> dict:
-    """The workbench's diagnosis of one log (the library call of ``servotau model diagnose``)."""
-    from servotau.identification.workbench import diagnose, load_dataset, parse_spec
+def diagnose_log(ds) -> dict:
+    """The workbench's diagnosis of one log's dataset (the library call of ``servotau model diagnose``)."""
+    from servotau.identification.workbench import diagnose, parse_spec
 
     start = time.perf_counter()
     try:
-        ds = load_dataset(dict(log))
         d = diagnose(ds, parse_spec("paper", ds.signals))
     except Exception as exc:  # a crash is a result, recorded
         return {"verdict": f"error: {type(exc).__name__}: {exc}"[:200], "ranked": [], "gains": [],
@@ -69,15 +69,14 @@ def diagnose_log(log: dict) -> dict:
             "gains": [round(float(c.heldout_gain), 4) for c in top], "seconds": time.perf_counter() - start}
 
 
-def oracle_of(log: dict, t_true, residuals: dict) -> dict:
-    """``oracle_gain`` per hidden effect and ``oracle_gain_all`` (every hidden effect at once) of one log; for a
-    pair, ``oracle_gain_alone``: each effect's gain from its own column only (without the interaction)."""
-    from servotau.identification.workbench import load_dataset
-
+def oracle_of(ds, t_true, residuals: dict) -> dict:
+    """``oracle_gain`` per hidden effect and ``oracle_gain_all`` (every hidden effect at once) of one log's dataset;
+    for a pair, ``oracle_gain_alone``: each effect's gain from its own column only (without the interaction)."""
     try:
-        ds = load_dataset(dict(log))
-        gains = {e: round(float(oracle_gain(ds, t_true, rs)), 4) for e, rs in residuals.items()}
-        alone = {e: round(float(oracle_gain(ds, t_true, rs[:1])), 4) for e, rs in residuals.items() if len(rs) > 1}
+        base = paper_fit(ds)  # the paper model's folds and held-out error, once per log
+        gains = {e: round(float(oracle_gain(ds, t_true, rs, base)), 4) for e, rs in residuals.items()}
+        alone = {e: round(float(oracle_gain(ds, t_true, rs[:1], base)), 4) for e, rs in residuals.items()
+                 if len(rs) > 1}
     except Exception as exc:  # a crash is a result, recorded
         return {"oracle_error": f"{type(exc).__name__}: {exc}"[:200]}
     out = {"oracle_gain": {e: g for e, g in gains.items() if e != "all"}, "oracle_gain_all": gains["all"]}
@@ -90,35 +89,65 @@ def row_of(truth: dict, result: dict, split: int = SPLIT) -> dict:
 
 
 def _job(item):
+    """One log read once (:func:`load_dataset`), diagnosed, and scored by the oracle when it hides an effect."""
+    from servotau.identification.workbench import load_dataset
+
     log, truth, t_true, residuals = item
-    oracle = oracle_of(log, t_true, residuals) if truth["hidden"] else {}
-    return truth, {**diagnose_log(log), **oracle}
+    start = time.perf_counter()
+    try:
+        ds = load_dataset(dict(log))
+    except Exception as exc:  # a crash is a result, recorded (by the diagnosis and the oracle, as each read it)
+        crash = f"{type(exc).__name__}: {exc}"
+        return truth, {"verdict": f"error: {crash}"[:200], "ranked": [], "gains": [],
+                       "seconds": time.perf_counter() - start, **({"oracle_error": crash[:200]} if truth["hidden"]
+                                                                   else {})}
+    read = time.perf_counter() - start
+    oracle = oracle_of(ds, t_true, residuals) if truth["hidden"] else {}
+    result = diagnose_log(ds)
+    result["seconds"] += read  # as `servotau model diagnose` times it: reading the log, then the diagnosis
+    return truth, {**result, **oracle}
+
+
+def _batch(plants: list, duration: float, pool) -> list[tuple]:
+    """The ``_job`` items of ``plants``: simulated side by side; the plants of each pair's effects alone (for the
+    oracle) simulated meanwhile in ``pool`` (here without one)."""
+    pairs = singles(plants)
+    alone = pool.submit(simulate, [p for _, _, p in pairs], duration) if pool is not None and pairs else None
+    trues = simulate(plants, duration)
+    residuals = effect_residuals(plants, trues, alone.result() if alone is not None else None)
+    return [(measure(p, tr), p.truth(), tr["t"], res) for p, tr, res in zip(plants, trues, residuals, strict=True)]
 
 
 def run_family(seeds, *, workers: int = 2, duration: float = 20.0, split: int = SPLIT, progress=None) -> list[dict]:
     """Simulate the plants of ``seeds`` and diagnose each log; one row per log, with the oracle gains of its
-    hidden effects (from the true signals, which the log does not carry)."""
-    rows = []
+    hidden effects (from the true signals, which the log does not carry). The plants are simulated ``BATCH`` at a
+    time; ``workers`` processes (one pool for the run; none for 1) diagnose a batch while the next is simulated."""
+    rows: list[dict] = []
     seeds = list(seeds)
-    for b in range(0, len(seeds), 32):
-        plants = [draw_plant(s, duration=duration) for s in seeds[b:b + 32]]
-        if progress:
-            progress(f"simulating plants {plants[0].seed}..{plants[-1].seed}")
-        trues = simulate(plants, duration)
-        residuals = effect_residuals(plants, trues)
-        items = [(measure(p, tr), p.truth(), tr["t"], res) for p, tr, res in zip(plants, trues, residuals,
-                                                                                   strict=True)]
-        del trues
-        if workers > 1:
-            with ProcessPoolExecutor(workers) as pool:
-                results = list(pool.map(_job, items))
-        else:
-            results = [_job(item) for item in items]
+    pool = ProcessPoolExecutor(workers) if workers > 1 else None
+
+    def collect(results) -> None:
         for truth, res in results:
             rows.append(row_of(truth, res, split))
             if progress:
                 progress(f"seed {truth['seed']:4d} {truth['period_ms']:2d} ms hidden {truth['hidden'] or 'none'}: "
                          f"{res['verdict']} {res['ranked']} oracle {res.get('oracle_gain', '-')}")
+
+    try:
+        pending = None
+        for b in range(0, len(seeds), BATCH):
+            plants = [draw_plant(s, duration=duration) for s in seeds[b:b + BATCH]]
+            if progress:
+                progress(f"simulating plants {plants[0].seed}..{plants[-1].seed}")
+            items = _batch(plants, duration, pool)
+            if pending is not None:
+                collect(pending)
+            pending = pool.map(_job, items) if pool is not None else map(_job, items)
+        if pending is not None:
+            collect(pending)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
     return rows
 
 
