@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from servotau.experiments import plant_family as pf
+from servotau.experiments import plant_scoring as ps
 from servotau.experiments.plant_oracle import alone, effect_residuals, oracle_gain, servo_residual
-from servotau.experiments.plant_scoring import band_of, confusion, detectable, score
+from servotau.experiments.plant_scoring import band_of, confusion, detectable, part_of, score
 from servotau.identification.workbench import MIN_GAIN, load_dataset
 
 DUR = 2.0  # [s]
@@ -62,7 +63,7 @@ def test_each_effect_of_a_pair_gets_its_own_oracle():
 
 
 def _row(seed, hidden, verdict, ranked, oracle):
-    return {"seed": seed, "part": "tuning" if seed < 50 else "held_out", "period_ms": 1, "band": band_of(1),
+    return {"seed": seed, "part": part_of(seed), "period_ms": 1, "band": band_of(1),
             "hidden": hidden, "verdict": verdict, "ranked": ranked, "gains": [0.0, 0.0], "seconds": 0.0,
             **({"oracle_gain": oracle} if oracle is not None else {})}
 
@@ -82,6 +83,7 @@ def test_scores_on_the_detectable_effects():
     assert d["effects"]["coulomb"] == {"n": 1, "top1": 1.0, "top2": 1.0, "named": 1.0, "undetectable": 1,
                                        "unknown": 0}
     assert [(m["seed"], m["effect"], m["oracle_gain"]) for m in d["misses"]] == [(2, "delay", 0.3)]
+    assert d["n_misses"] == 1
     s = score(rows, min_gain=0.1)
     assert s["tuning"]["detectable"]["n"] == 3
     assert s["tuning"]["top1"] == 0.333  # the raw scores still count every hidden effect (2 hits of 6)
@@ -95,3 +97,40 @@ def test_named_is_what_the_verdict_names_not_the_first_ranked():
     s = score([row])["tuning"]
     assert s["top1"] == 0.0 and s["top2"] == 1.0 and s["named"] == 1.0
     assert confusion([row]) == {"coulomb": {"coulomb": 1}}
+
+
+def test_the_parts_are_fixed_seed_ranges():
+    assert [part_of(s) for s in (0, 49, 50, 99, 100, 149, 10_000)] == ["tuning", "tuning", "held_out", "held_out",
+                                                                      "unseen", "unseen", "unseen"]
+
+
+def test_the_unseen_part_is_scored_but_never_shown_per_seed():
+    """Rows of seeds from 100 (made up here: no unseen plant is simulated): scored in their own part, their misses
+    counted, not listed."""
+    rows = [_row(2, ["delay"], "no_missing_effect", ["stribeck", "coulomb"], {"delay": 0.3}),
+            _row(120, ["delay"], "no_missing_effect", ["stribeck", "coulomb"], {"delay": 0.3}),
+            _row(121, ["coulomb"], "missing_effect", ["coulomb", "stribeck"], {"coulomb": 0.8})]
+    s = score(rows, min_gain=0.1)
+    assert set(s) == {"tuning", "held_out", "unseen"} and "unseen" not in score(rows[:1], min_gain=0.1)
+    unseen = s["unseen"]["detectable"]
+    assert (unseen["n"], unseen["n_misses"], unseen["misses"]) == (2, 1, [])
+    assert [m["seed"] for m in detectable(rows, 0.1)["misses"]] == [2]
+    assert ps.reveal(rows[0]) and not ps.reveal(rows[1])
+
+
+def test_run_family_reports_unseen_logs_as_a_counter(monkeypatch):
+    """The progress lines name each tuning or held-out log and only count the unseen ones (fake batches and jobs:
+    no plant is simulated)."""
+    seeds = [48, 49, 100, 101, 102]
+    monkeypatch.setattr(ps, "BATCH", 2)
+    monkeypatch.setattr(ps, "_batch", lambda plants, duration, pool: [p.seed for p in plants])
+    monkeypatch.setattr(ps, "draw_plant", lambda seed, duration: type("P", (), {"seed": seed})())
+    monkeypatch.setattr(ps, "_job", lambda seed: ({"seed": seed, "period_ms": 3, "hidden": ["delay"]},
+                                                  {"verdict": "unexplained", "ranked": ["x"], "gains": [0.1]}))
+    lines: list[str] = []
+    rows = ps.run_family(seeds, workers=1, progress=lines.append)
+    assert [r["part"] for r in rows] == ["tuning", "tuning", "unseen", "unseen", "unseen"]
+    shown = [x for x in lines if not x.startswith("simulating")]
+    assert shown[2:] == ["unseen: 1/3 done", "unseen: 2/3 done", "unseen: 3/3 done"]
+    assert all("seed  10" not in x and "unexplained" not in x for x in shown[2:])
+    assert shown[0].startswith("seed   48  3 ms hidden ['delay']: unexplained")

@@ -13,13 +13,20 @@ Per log: the hidden effect(s) (from the side dict), the workbench's verdict and 
   reaches the workbench's materiality threshold ``MIN_GAIN``. The ``detectable`` section repeats the scores on
   the detectable effects only, counts the undetectable ones per effect, and lists the detectable misses (not
   ranked first or second): the workbench's own failures. The raw scores count every hidden effect;
-- everything per part (``tuning``: seeds below the split; ``held_out``: the rest, which nobody tunes on) and per
-  sample-period band.
+- everything per part (``PARTS``, fixed seed ranges: ``tuning`` 0-49, tuned on; ``held_out`` 50-99, not tuned on
+  but looked at per seed; ``unseen`` from 100, which nobody tunes on or looks at per seed) and per sample-period
+  band.
+
+The ``unseen`` part stays unseen: :func:`run_family` reports its logs only as a counter, and its scores carry no
+per-seed detail (its ``detectable`` section counts the misses instead of listing them; :func:`reveal` says
+whether a row may be shown).
 """
 
 from __future__ import annotations
 
+import logging
 import time
+import warnings
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
 
@@ -30,7 +37,8 @@ from .plant_oracle import effect_residuals, oracle_gain, paper_fit, singles
 # any name that mentions viscous or power (the library's is viscous_power; a user's variant counts too).
 ACCEPT: dict[str, tuple[str, ...]] = {e: (e,) for e in EFFECTS}
 BANDS = ((1, 2, "1-2 ms"), (3, 6, "3-6 ms"), (7, 16, "7-16 ms"))
-SPLIT = 50  # seeds below: tuning part; at or above: held-out part
+PARTS = (("tuning", 0, 50), ("held_out", 50, 100), ("unseen", 100, None))  # [first seed, end) of each part
+UNSEEN = "unseen"  # the part nobody tunes on or looks at per seed
 BATCH = 32  # plants simulated side by side
 
 
@@ -49,8 +57,13 @@ def band_of(period_ms: int) -> str:
     return f"{period_ms} ms"
 
 
-def part_of(seed: int, split: int = SPLIT) -> str:
-    return "tuning" if seed < split else "held_out"
+def part_of(seed: int) -> str:
+    return next(name for name, lo, hi in PARTS if lo <= seed and (hi is None or seed < hi))
+
+
+def reveal(row: dict) -> bool:
+    """Whether ``row`` may be shown per seed (not a row of the unseen part)."""
+    return row["part"] != UNSEEN
 
 
 def diagnose_log(ds) -> dict:
@@ -83,16 +96,30 @@ def oracle_of(ds, t_true, residuals: dict) -> dict:
     return {**out, "oracle_gain_alone": alone} if alone else out
 
 
-def row_of(truth: dict, result: dict, split: int = SPLIT) -> dict:
-    return {"seed": truth["seed"], "part": part_of(truth["seed"], split), "period_ms": truth["period_ms"],
+def row_of(truth: dict, result: dict) -> dict:
+    return {"seed": truth["seed"], "part": part_of(truth["seed"]), "period_ms": truth["period_ms"],
             "band": band_of(truth["period_ms"]), "hidden": list(truth["hidden"]), **result}
 
 
 def _job(item):
     """One log read once (:func:`load_dataset`), diagnosed, and scored by the oracle when it hides an effect."""
+    log, truth, t_true, residuals = item
+    if part_of(truth["seed"]) == UNSEEN:  # no warning names anything about an unseen log
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            quiet = logging.getLogger("servotau")
+            level = quiet.level
+            quiet.setLevel(logging.CRITICAL + 1)
+            try:
+                return _scored(log, truth, t_true, residuals)
+            finally:
+                quiet.setLevel(level)
+    return _scored(log, truth, t_true, residuals)
+
+
+def _scored(log, truth: dict, t_true, residuals: dict):
     from servotau.identification.workbench import load_dataset
 
-    log, truth, t_true, residuals = item
     start = time.perf_counter()
     try:
         ds = load_dataset(dict(log))
@@ -118,20 +145,26 @@ def _batch(plants: list, duration: float, pool) -> list[tuple]:
     return [(measure(p, tr), p.truth(), tr["t"], res) for p, tr, res in zip(plants, trues, residuals, strict=True)]
 
 
-def run_family(seeds, *, workers: int = 2, duration: float = 20.0, split: int = SPLIT, progress=None) -> list[dict]:
+def run_family(seeds, *, workers: int = 2, duration: float = 20.0, progress=None) -> list[dict]:
     """Simulate the plants of ``seeds`` and diagnose each log; one row per log, with the oracle gains of its
     hidden effects (from the true signals, which the log does not carry). The plants are simulated ``BATCH`` at a
-    time; ``workers`` processes (one pool for the run; none for 1) diagnose a batch while the next is simulated."""
+    time; ``workers`` processes (one pool for the run; none for 1) diagnose a batch while the next is simulated.
+    ``progress`` gets a line per log, and for the unseen part only a counter ("unseen: 12/50 done")."""
     rows: list[dict] = []
     seeds = list(seeds)
+    unseen = sum(part_of(s) == UNSEEN for s in seeds)
     pool = ProcessPoolExecutor(workers) if workers > 1 else None
 
     def collect(results) -> None:
         for truth, res in results:
-            rows.append(row_of(truth, res, split))
-            if progress:
-                progress(f"seed {truth['seed']:4d} {truth['period_ms']:2d} ms hidden {truth['hidden'] or 'none'}: "
-                         f"{res['verdict']} {res['ranked']} oracle {res.get('oracle_gain', '-')}")
+            rows.append(row_of(truth, res))
+            if not progress:
+                continue
+            if not reveal(rows[-1]):
+                progress(f"{UNSEEN}: {sum(not reveal(r) for r in rows)}/{unseen} done")
+                continue
+            progress(f"seed {truth['seed']:4d} {truth['period_ms']:2d} ms hidden {truth['hidden'] or 'none'}: "
+                     f"{res['verdict']} {res['ranked']} oracle {res.get('oracle_gain', '-')}")
 
     try:
         pending = None
@@ -198,9 +231,10 @@ def _hits(r: dict, e: str) -> tuple[bool, bool, bool]:
 
 def detectable(rows: list[dict], min_gain: float) -> dict:
     """The scores restricted to the hidden effects whose oracle gain reaches ``min_gain``; the undetectable (and
-    unknown: no oracle gain in the row) counted per effect; the detectable misses (not in the top two)."""
+    unknown: no oracle gain in the row) counted per effect; the detectable misses (not in the top two): counted
+    (``n_misses``) and listed, but for the rows of the unseen part (:func:`reveal`)."""
     per = defaultdict(lambda: Counter())
-    misses = []
+    misses, n_misses = [], 0
     for r in rows:
         for e in r["hidden"]:
             c = per[e]
@@ -216,7 +250,8 @@ def detectable(rows: list[dict], min_gain: float) -> dict:
             c["top1"] += top1
             c["top2"] += top2
             c["named"] += named
-            if not top2:
+            n_misses += not top2
+            if not top2 and reveal(r):
                 misses.append({"seed": r["seed"], "period_ms": r["period_ms"], "hidden": r["hidden"], "effect": e,
                                "oracle_gain": g, "oracle_gain_alone": r.get("oracle_gain_alone", {}).get(e),
                                "verdict": r["verdict"], "ranked": r["ranked"], "gains": r["gains"]})
@@ -229,7 +264,7 @@ def detectable(rows: list[dict], min_gain: float) -> dict:
     return {"min_gain": min_gain, "n": total["n"], "top1": _rate(total["top1"], total["n"]),
             "top2": _rate(total["top2"], total["n"]), "named": _rate(total["named"], total["n"]),
             "undetectable": total["undetectable"], "unknown": total["unknown"], "effects": effects,
-            "misses": misses}
+            "n_misses": n_misses, "misses": misses}
 
 
 def confusion(rows: list[dict]) -> dict:
@@ -243,13 +278,13 @@ def confusion(rows: list[dict]) -> dict:
 
 
 def score(rows: list[dict], min_gain: float | None = None) -> dict:
-    """Hit rates and false alarms per part, and per sample-period band inside each part; the confusion matrix;
-    the scores on the detectable effects (oracle gain at least ``min_gain``, default the workbench's
-    ``MIN_GAIN``)."""
+    """Hit rates and false alarms per part (tuning and held out, and the unseen part when ``rows`` has some), and
+    per sample-period band inside each part; the confusion matrix; the scores on the detectable effects (oracle gain
+    at least ``min_gain``, default the workbench's ``MIN_GAIN``)."""
     if min_gain is None:
         from servotau.identification.workbench import MIN_GAIN as min_gain
     out = {}
-    for part in ("tuning", "held_out"):
+    for part in [name for name, _lo, _hi in PARTS if name != UNSEEN or any(r["part"] == UNSEEN for r in rows)]:
         sub = [r for r in rows if r["part"] == part]
         s = _score_rows(sub)
         s["detectable"] = detectable(sub, min_gain)
