@@ -3,7 +3,8 @@
 Simulates single-joint position-servo plants written from first principles (servotau/experiments/plant_family.py,
 no simrobot, no workbench code), each clean or with one or two hidden effects, sampled every 1 to 16 ms, and
 runs the workbench's diagnosis (``servotau model diagnose``, paper base) on each log. Prints ONE JSON object:
-per-effect hit rates (hidden effect ranked first / first or second), the false-alarm rate on clean logs, per part
+per-effect hit rates (hidden effect ranked first / first or second; named; ``steps2``: named or the next to add once
+the named one is in the model), the false-alarm rate on clean logs, per part
 and per sample-period band, the confusion matrix, seconds. The parts are fixed seed ranges (plant_scoring.PARTS):
 
 - tuning: seeds 0-49, which the workbench was tuned on;

@@ -80,8 +80,8 @@ def test_scores_on_the_detectable_effects():
     d = detectable(rows, 0.1)
     assert (d["n"], d["undetectable"], d["unknown"]) == (3, 2, 1)
     assert d["top1"] == pytest.approx(2 / 3, abs=1e-3) and d["named"] == pytest.approx(2 / 3, abs=1e-3)
-    assert d["effects"]["coulomb"] == {"n": 1, "top1": 1.0, "top2": 1.0, "named": 1.0, "undetectable": 1,
-                                       "unknown": 0}
+    assert d["effects"]["coulomb"] == {"n": 1, "top1": 1.0, "top2": 1.0, "named": 1.0, "steps2": 1.0,
+                                       "undetectable": 1, "unknown": 0}
     assert [(m["seed"], m["effect"], m["oracle_gain"]) for m in d["misses"]] == [(2, "delay", 0.3)]
     assert d["n_misses"] == 1
     s = score(rows, min_gain=0.1)
@@ -134,3 +134,14 @@ def test_run_family_reports_unseen_logs_as_a_counter(monkeypatch):
     assert shown[2:] == ["unseen: 1/3 done", "unseen: 2/3 done", "unseen: 3/3 done"]
     assert all("seed  10" not in x and "unexplained" not in x for x in shown[2:])
     assert shown[0].startswith("seed   48  3 ms hidden ['delay']: unexplained")
+
+
+def test_steps2_counts_the_next_effect_to_add():
+    """A pair whose second effect ranks below the first one's look-alikes but is the next to add once the first is
+    in the model (``then``): found in two steps, not in the top two."""
+    row = {"seed": 0, "part": "tuning", "period_ms": 1, "band": "1-2 ms", "hidden": ["coulomb", "cogging"],
+           "verdict": "missing_effect", "named": "coulomb", "then": "cogging", "ranked": ["coulomb", "stribeck"],
+           "gains": [0.5, 0.4]}
+    s = score([row])["tuning"]
+    assert s["top2"] == 0.5 and s["steps2"] == 1.0
+    assert s["effects"]["cogging"]["steps2"] == 1.0 and s["effects"]["cogging"]["top2"] == 0.0

@@ -6,6 +6,8 @@ Per log: the hidden effect(s) (from the side dict), the workbench's verdict and 
 - per hidden effect, ``top1`` / ``top2``: an accepted name of the effect is ranked first / first or second
   (each effect of a pair is scored on its own);
 - ``named``: the verdict is ``missing_effect`` and the named effect is accepted;
+- ``steps2``: the effect is named, or it is the next to add once the named one is in the model
+  (``Diagnosis.then``): the first two effects the workbench tells the user to add, in order;
 - on clean logs, ``false_alarm``: the verdict is ``missing_effect`` (a missing effect is named where none is
   hidden); ``unexplained`` is counted separately;
 - per hidden effect, its *oracle gain* (:mod:`.plant_oracle`: the held-out gain over the paper model of the
@@ -78,7 +80,8 @@ def diagnose_log(ds) -> dict:
                 "seconds": time.perf_counter() - start}
     top = [c for c in d.ranking if c.testable][:2]
     named = d.top.effect if d.verdict == "missing_effect" else None  # what the verdict names (may be ranked second)
-    return {"verdict": d.verdict, "named": named, "ranked": [c.effect for c in top],
+    return {"verdict": d.verdict, "named": named, "then": d.then.effect if d.then is not None else None,
+            "ranked": [c.effect for c in top],
             "gains": [round(float(c.heldout_gain), 4) for c in top], "seconds": time.perf_counter() - start}
 
 
@@ -201,17 +204,20 @@ def _score_rows(rows: list[dict]) -> dict:
         for e in r["hidden"]:
             c = per[e]
             c["n"] += 1
-            top1, top2, named = _hits(r, e)
+            top1, top2, named, steps = _hits(r, e)
             c["top1"] += top1
             c["top2"] += top2
             c["named"] += named
+            c["steps2"] += steps
     effects = {e: {"n": c["n"], "top1": _rate(c["top1"], c["n"]), "top2": _rate(c["top2"], c["n"]),
-                   "named": _rate(c["named"], c["n"])} for e, c in sorted(per.items())}
+                   "named": _rate(c["named"], c["n"]), "steps2": _rate(c["steps2"], c["n"])}
+               for e, c in sorted(per.items())}
     n_eff = sum(c["n"] for c in per.values())
     return {"n_logs": len(rows), "effects": effects,
             "top1": _rate(sum(c["top1"] for c in per.values()), n_eff),
             "top2": _rate(sum(c["top2"] for c in per.values()), n_eff),
             "named": _rate(sum(c["named"] for c in per.values()), n_eff),
+            "steps2": _rate(sum(c["steps2"] for c in per.values()), n_eff),
             "clean": {"n": clean["n"], "false_alarm": _rate(clean["false_alarm"], clean["n"]),
                       "unexplained": _rate(clean["unexplained"], clean["n"]), "errors": clean["error"]}}
 
@@ -223,10 +229,13 @@ def _named(r: dict) -> str | None:
     return r.get("named") or (r["ranked"][0] if r["ranked"] else None)
 
 
-def _hits(r: dict, e: str) -> tuple[bool, bool, bool]:
-    """(top1, top2, named) of hidden effect ``e`` in row ``r``."""
+def _hits(r: dict, e: str) -> tuple[bool, bool, bool, bool]:
+    """(top1, top2, named, steps2) of hidden effect ``e`` in row ``r``; ``steps2``: named, or the next to add once the
+    named one is in the model (``Diagnosis.then``): the first two effects the workbench tells the user to add."""
     top = r["ranked"]
-    return bool(top) and accepted(e, top[0]), any(accepted(e, x) for x in top[:2]), accepted(e, _named(r))
+    named = accepted(e, _named(r))
+    return (bool(top) and accepted(e, top[0]), any(accepted(e, x) for x in top[:2]), named,
+            named or accepted(e, r.get("then")))
 
 
 def detectable(rows: list[dict], min_gain: float) -> dict:
@@ -245,24 +254,28 @@ def detectable(rows: list[dict], min_gain: float) -> dict:
             if g < min_gain:
                 c["undetectable"] += 1
                 continue
-            top1, top2, named = _hits(r, e)
+            top1, top2, named, steps = _hits(r, e)
             c["n"] += 1
             c["top1"] += top1
             c["top2"] += top2
             c["named"] += named
+            c["steps2"] += steps
             n_misses += not top2
             if not top2 and reveal(r):
                 misses.append({"seed": r["seed"], "period_ms": r["period_ms"], "hidden": r["hidden"], "effect": e,
                                "oracle_gain": g, "oracle_gain_alone": r.get("oracle_gain_alone", {}).get(e),
-                               "verdict": r["verdict"], "ranked": r["ranked"], "gains": r["gains"]})
+                               "verdict": r["verdict"], "ranked": r["ranked"], "gains": r["gains"],
+                               "then": r.get("then")})
     total = Counter()
     for c in per.values():
         total.update(c)
     effects = {e: {"n": c["n"], "top1": _rate(c["top1"], c["n"]), "top2": _rate(c["top2"], c["n"]),
-                   "named": _rate(c["named"], c["n"]), "undetectable": c["undetectable"], "unknown": c["unknown"]}
+                   "named": _rate(c["named"], c["n"]), "steps2": _rate(c["steps2"], c["n"]),
+                   "undetectable": c["undetectable"], "unknown": c["unknown"]}
                for e, c in sorted(per.items())}
     return {"min_gain": min_gain, "n": total["n"], "top1": _rate(total["top1"], total["n"]),
             "top2": _rate(total["top2"], total["n"]), "named": _rate(total["named"], total["n"]),
+            "steps2": _rate(total["steps2"], total["n"]),
             "undetectable": total["undetectable"], "unknown": total["unknown"], "effects": effects,
             "n_misses": n_misses, "misses": misses}
 
