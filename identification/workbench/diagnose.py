@@ -66,7 +66,7 @@ from .data import Dataset
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
-from .probes import FoldBase, base_per_fold, probe_gains
+from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
 from .resolution import quantisation_floor
 from .verdict import Candidate, Confusion, Diagnosis, recheck_probes, verdict_of
 
@@ -233,9 +233,7 @@ def diagnose(
     y = ds.target
     exc = excitation_report(ds.signals)
     bases = base_per_fold(ds, spec, loss, folds, cache)
-    base_pred = np.full(ds.n, np.nan)
-    for b in bases:
-        base_pred[b.fold.test] = b.pred[b.fold.test]
+    base_pred = heldout_prediction(bases, ds.n)
     e0 = error_of(y - base_pred, y, loss)
     e0_folds = _fold_errors(y, base_pred, folds, loss)
     train0 = base.train.error
@@ -289,9 +287,7 @@ def diagnose(
         try:
             with_top = spec.plus(Term(top.effect, top.shape))
             b2 = base_per_fold(ds, with_top, loss, folds, cache)
-            p2 = np.full(ds.n, np.nan)
-            for b in b2:
-                p2[b.fold.test] = b.pred[b.fold.test]
+            p2 = heldout_prediction(b2, ds.n)
             fitted = fit_spec(ds.signals, y, with_top, loss, cache=cache)
             rem = probe_gains(ds, b2, fitted, loss, error_of(y - p2, y, loss), only=top.family)[top.family]
             partial = top.partial or (rem >= REMAINING and rem >= 0.25 * top.heldout_gain)
@@ -347,9 +343,7 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
     y = ds.target
     with_top = spec.plus(Term(top.effect, top.shape))
     bases = base_per_fold(ds, with_top, loss, folds, cache)
-    pred0 = np.full(ds.n, np.nan)
-    for b in bases:
-        pred0[b.fold.test] = b.pred[b.fold.test]
+    pred0 = heldout_prediction(bases, ds.n)
     e0 = error_of(y - pred0, y, loss)
     e0_folds = _fold_errors(y, pred0, folds, loss)
     if not e0 > 0:
@@ -419,9 +413,7 @@ def _gain_with(ds: Dataset, spec: ModelSpec, eff: Effect, loss: Loss, folds: lis
     """Held-out gain of ``eff`` over ``spec`` on ``ds`` (the same blocks and nested shape choice)."""
     cache: dict = {}
     bases = base_per_fold(ds, spec, loss, folds, cache)
-    base_pred = np.full(ds.n, np.nan)
-    for b in bases:
-        base_pred[b.fold.test] = b.pred[b.fold.test]
+    base_pred = heldout_prediction(bases, ds.n)
     e0 = error_of(ds.target - base_pred, ds.target, loss)
     pred, _ = _score_effect(ds, eff, bases, loss, cache)
     if np.isnan(pred).any() or not e0 > 0:

@@ -60,6 +60,14 @@ def base_per_fold(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], c
     return out
 
 
+def heldout_prediction(bases: list[FoldBase], n: int) -> np.ndarray:
+    """Each sample predicted by the fold that holds it out (NaN where no fold does)."""
+    pred = np.full(n, np.nan)
+    for b in bases:
+        pred[b.fold.test] = b.pred[b.fold.test]
+    return pred
+
+
 @dataclass(frozen=True, eq=False)
 class Bins:
     """A one-hot family kept as its bin indices: ``index`` of each sample in ``0 .. k - 1``, every bin used by some

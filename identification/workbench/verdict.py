@@ -24,7 +24,7 @@ from .checks import derivative_checks
 from .data import Dataset
 from .evaluate import Comparison, error_of
 from .model import FittedModel, ModelSpec, design, fit_spec
-from .probes import MEMORY_HORIZON_S, base_per_fold, memory_candidates, probe_gains
+from .probes import MEMORY_HORIZON_S, base_per_fold, heldout_prediction, memory_candidates, probe_gains
 
 PROBE_FACTOR = 2.0
 """A probe (tens of free parameters) names ``unexplained`` structure from ``PROBE_FACTOR * min_gain`` on."""
@@ -239,9 +239,7 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
         cache: dict = {}
         try:
             bases = base_per_fold(fds, spec, loss, folds, cache)
-            pred = np.full(fds.n, np.nan)
-            for b in bases:
-                pred[b.fold.test] = b.pred[b.fold.test]
+            pred = heldout_prediction(bases, fds.n)
             e0 = error_of(fds.target - pred, fds.target, loss)
             model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
             again = probe_gains(fds, bases, model, loss, e0)
