@@ -257,3 +257,21 @@ def test_the_next_effect_to_add_is_scored_over_the_model_with_the_named_one():
     assert d.then is not None and d.then.effect == "coulomb", d.message
     assert d.then.heldout_gain > 0.5 > d.candidate("coulomb").heldout_gain, d.message
     assert "coulomb removes a further" in d.message and d.to_dict()["then"]["effect"] == "coulomb"
+
+
+def test_a_constant_error_is_not_named_as_a_lag():
+    """A driver dead zone under a gravity load that never changes sign (plant 67 of the independent family, held
+    out) is a constant error: the paper model, without an offset, biases k_tau, and `delay` fitted the bias (62 %).
+    Nothing that loses its gain once an offset is in the model is named; the message says to add the offset, and
+    with it nothing is missing."""
+    from servotau.experiments import plant_family as pf
+
+    plant = pf.draw_plant(67)
+    (true,) = pf.simulate([plant])
+    assert plant.hidden == ("deadzone",) and np.all(true["tau"] <= 0)  # the load never changes sign
+    ds = load_dataset(dict(pf.measure(plant, true)))
+    d = diagnose(ds, parse_spec("paper", ds.signals))
+    assert d.verdict != "missing_effect", d.message
+    assert "constant error" in d.candidate("delay").reason and any("--offset on" in c for c in d.checks), d.message
+    with_offset = diagnose(ds, parse_spec("paper", ds.signals, offset=True))
+    assert with_offset.verdict == "no_missing_effect", with_offset.message

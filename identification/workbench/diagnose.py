@@ -58,6 +58,7 @@ import numpy as np
 
 from servotau.actuator import Effect, Loss, excitation_report, resolve_effects
 from servotau.actuator.excitation import units_plausible
+from servotau.actuator.terms import OFFSET
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
@@ -281,7 +282,7 @@ def diagnose(
         ))
     ranking = _within_resolution(ds, ranking, e0, loss, min_gain)
     ranking.sort(key=_order)
-    ranking = _derivative_checked(ds, spec, ranking, loss, folds, min_gain)
+    ranking = _checked(ds, spec, ranking, loss, folds, min_gain)
     top = ranking[0] if ranking and ranking[0].testable else None
     if top is not None and top.heldout_gain >= min_gain and top.consistent and top.family in probes:
         try:
@@ -296,7 +297,12 @@ def diagnose(
             pass
     probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
     probes, floored = _probes_within_resolution(ds, probes, e0, loss)
-    d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks + floored)
+    checks += floored
+    constant = [c.effect for c in ranking if c.reason and "a constant error" in c.reason]
+    if constant:
+        checks += (f"{', '.join(constant)} lose their gain with a constant offset in the model, which it lacks: "
+                   "rerun with --offset on (an encoder's zero, or a dead zone under a load of one sign)",)
+    d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
     if d.verdict != "missing_effect" or not next_effect:
         return d
     try:
@@ -304,8 +310,7 @@ def diagnose(
     except IdentificationError as exc_:
         log.info("no next effect after %s: %s", d.top.effect, exc_)
         return d
-    return d if then is None else verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks + floored,
-                                             then)
+    return d if then is None else verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, then)
 
 
 def _order(c: Candidate) -> tuple:
@@ -313,24 +318,35 @@ def _order(c: Candidate) -> tuple:
     return not c.testable, -c.heldout_gain if math.isfinite(c.heldout_gain) else math.inf
 
 
-def _derivative_checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss, folds: list[Fold],
-                        min_gain: float) -> list[Candidate]:
-    """``ranking`` (sorted) where each lag-like effect that would come first and be named keeps its place only if
-    it removes ``min_gain`` with every less biased derivative (:func:`~.checks.derivative_checks`); otherwise it is
-    untestable, saying so, and the next one is considered."""
-    checks = None
-    while ranking and ranking[0].testable and ranking[0].family == "dynamics" \
-            and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
+def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss, folds: list[Fold],
+             min_gain: float) -> list[Candidate]:
+    """``ranking`` (sorted) where the effect that would come first and be named keeps its place only if it still
+    removes ``min_gain`` under each check that applies: a lag-like effect with every less biased derivative
+    (:func:`~.checks.derivative_checks`); any effect on a servo-error log whose model has no constant offset, with
+    one (a constant error, e.g. an encoder's zero or a dead zone under a load of one sign, biases ``k_tau``, and
+    lag-like and friction terms fit the bias). Otherwise it is untestable, saying why, and the next one is
+    considered."""
+    derivatives = None
+    offset = None
+    if ds.actuator and OFFSET not in spec.linear:
+        offset = replace(spec, linear=(*spec.linear, OFFSET))
+    while ranking and ranking[0].testable and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
         top = ranking[0]
-        checks = derivative_checks(ds) if checks is None else checks
-        if not checks:
+        alternatives = []
+        if top.family == "dynamics":
+            derivatives = derivative_checks(ds) if derivatives is None else derivatives
+            alternatives += [(d, spec, f"with {how}") for d, how in derivatives]
+        if offset is not None:
+            alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)"))
+        if not alternatives:
             break
         eff = resolve_effects([top.effect])[0]
-        g, how = min(((_gain_with(d, spec, eff, loss, folds), how) for d, how in checks), key=lambda x: x[0])
+        g, how = min(((_gain_with(d, sp, eff, loss, folds), how) for d, sp, how in alternatives), key=lambda x: x[0])
         if g >= min_gain:
             break
+        cause = "the differentiation's error" if "dq" in how else "a constant error"
         ranking[0] = replace(top, testable=False, reason=(
-            f"cannot tell: may be the differentiation's error (held-out gain {100 * g:.0f} % with {how})"))
+            f"cannot tell: may be {cause} (held-out gain {100 * g:.0f} % {how})"))
         ranking.sort(key=_order)
     return ranking
 
@@ -361,7 +377,7 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
                            consistent=bool(np.count_nonzero(fold_gains > 0) >= len(folds) - 1), explained=None,
                            partial=False, remaining=None))
     out = sorted(_within_resolution(ds, out, e0, loss, min_gain), key=_order)
-    out = _derivative_checked(ds, with_top, out, loss, folds, min_gain)
+    out = _checked(ds, with_top, out, loss, folds, min_gain)
     best = out[0] if out else None
     return best if best is not None and best.testable and best.heldout_gain >= min_gain and best.consistent else None
 
