@@ -320,22 +320,22 @@ def _order(c: Candidate) -> tuple:
 
 def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss, folds: list[Fold],
              min_gain: float) -> list[Candidate]:
-    """``ranking`` (sorted) where the effect that would come first and be named keeps its place only if it still
-    removes ``min_gain`` under each check that applies: a lag-like effect with every less biased derivative
-    (:func:`~.checks.derivative_checks`); any effect on a servo-error log whose model has no constant offset, with
-    one (a constant error, e.g. an encoder's zero or a dead zone under a load of one sign, biases ``k_tau``, and
-    lag-like and friction terms fit the bias). Otherwise it is untestable, saying why, and the next one is
-    considered."""
+    """``ranking`` (sorted) where a lag-like effect (family ``dynamics``) that would come first and be named keeps
+    its place only if it still removes ``min_gain`` with every less biased derivative
+    (:func:`~.checks.derivative_checks`) and, on a servo-error log whose model has no constant offset, with one (a
+    constant error, e.g. an encoder's zero or a dead zone under a load of one sign, biases ``k_tau``, and lag-like
+    terms fit the bias). Otherwise it is untestable, saying why, and the next one is considered. Friction-like
+    effects are not checked against the offset: a dead zone under a load of mostly one sign, or an asymmetric
+    Coulomb friction on a joint that rarely rests, is partly a constant and still physical."""
     derivatives = None
     offset = None
     if ds.actuator and OFFSET not in spec.linear:
         offset = replace(spec, linear=(*spec.linear, OFFSET))
-    while ranking and ranking[0].testable and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
+    while ranking and ranking[0].testable and ranking[0].family == "dynamics" \
+            and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
         top = ranking[0]
-        alternatives = []
-        if top.family == "dynamics":
-            derivatives = derivative_checks(ds) if derivatives is None else derivatives
-            alternatives += [(d, spec, f"with {how}") for d, how in derivatives]
+        derivatives = derivative_checks(ds) if derivatives is None else derivatives
+        alternatives = [(d, spec, f"with {how}") for d, how in derivatives]
         if offset is not None:
             alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)"))
         if not alternatives:
