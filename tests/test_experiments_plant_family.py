@@ -163,8 +163,8 @@ def test_scorer_on_a_hand_made_table():
     s = score(rows)
     t = s["tuning"]
     assert t["clean"] == {"n": 2, "false_alarm": 0.5, "unexplained": 0.0, "errors": 0}
-    assert t["effects"]["coulomb"] == {"n": 2, "top1": 0.5, "top2": 1.0, "named": 0.5}
-    assert t["effects"]["delay"] == {"n": 1, "top1": 1.0, "top2": 1.0, "named": 0.0}
+    assert t["effects"]["coulomb"] == {"n": 2, "top1": 0.5, "top2": 1.0, "named": 0.5, "steps2": 0.5}
+    assert t["effects"]["delay"] == {"n": 1, "top1": 1.0, "top2": 1.0, "named": 0.0, "steps2": 0.0}
     assert t["effects"]["cogging"]["top2"] == 0.0
     assert t["top2"] == 0.75
     assert t["bands"]["7-16 ms"]["effects"]["coulomb"]["top1"] == 0.0
