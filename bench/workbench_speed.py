@@ -15,6 +15,7 @@ the stages it calls):
 - ``check``: the faster-derivative checks of a lag-like effect and of a probe that would call the log
   ``unexplained`` (``recheck_probes``: its base fits; the probes it re-runs count as ``probes``);
 - ``probes``: the non-parametric probes;
+- ``next``: the next effect to add (its re-scored effects count as ``grid`` and ``full``);
 - ``verdict``: the verdict (confusion, tail);
 - ``other``: the rest of ``diagnose``.
 
@@ -36,7 +37,7 @@ STAGES = {  # module -> {function: stage}; functions a version of the code lacks
     "servotau.identification.workbench.data": {"cv_window": "window"},
     "servotau.identification.workbench.diagnose": {
         "compare": "base", "base_per_fold": "base", "resolve_shapes": "base?", "_score_effect": "grid",
-        "_full_fit": "full", "faster_derivative": "check", "_gain_with": "check", "probe_gains": "probes",
+        "_full_fit": "full", "_checked": "check", "_gain_with": "check", "probe_gains": "probes", "_then": "next",
         "verdict_of": "verdict", "recheck_probes": "check",
     },
     "servotau.identification.workbench.verdict": {"probe_gains": "probes"},

@@ -85,7 +85,8 @@ class Dataset:
         notes: What was derived (e.g. "dq: centred Savitzky-Golay derivative of q"), and what looked wrong
             (jitter, gaps, constant columns, implausible units).
         preprocessing: Per derived signal (``dq``, ``tau``): ``source`` ("log", "derivative of q",
-            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``. A joined log
+            "smoothed") and, when filtered, ``window`` [samples] and ``seconds``; ``q``: the encoder's
+            ``resolution`` [rad] when the angles sit on a lattice (:mod:`.resolution`). A joined log
             (:func:`~.recordings.combine`) adds ``windows``: per recording ``(first row, window [samples], period
             [s])``; ``window`` is then the recordings' common window, or the windows as text ("15 and 9",
             :func:`windows_text`) when they differ ("seconds" only when common).

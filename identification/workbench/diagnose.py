@@ -29,10 +29,13 @@ Verdict:
 
 The workbench never reports its own preprocessing error as a physical effect: when ``dq`` was
 differentiated here (not the log's own), a lag-like effect (family ``dynamics``: delay, motor lag,
-elastic, backlash) that would be named is re-scored with less biased velocities (:func:`~.data.derivative_checks`:
+elastic, backlash) that would be named is re-scored with less biased velocities (:func:`~.checks.derivative_checks`:
 over half the window, and a cubic fit over the same window); if its held-out gain with either falls below
 ``min_gain`` it is not named but reported untestable, "cannot tell: may be the differentiation's error", and the
-next effect is considered.
+next effect is considered. On a servo-error log whose model has no constant offset, such an effect is also
+re-scored with one: a constant error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``,
+and lag-like terms fit the bias ("cannot tell: may be a constant error"; the message says to rerun with the
+offset).
 
 Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
 ranked but never named: they are reported as untestable, not as absent. Nor is an effect named (or a probe
@@ -69,7 +72,7 @@ from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
 from .resolution import quantisation_floor
-from .verdict import Candidate, Confusion, Diagnosis, recheck_probes, verdict_of
+from .verdict import Candidate, Confusion, Diagnosis, nameable, recheck_probes, verdict_of
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
 
@@ -84,6 +87,8 @@ PARTIAL = 0.75
 REMAINING = 0.05
 """Held-out gain of the named effect's family probe, on the model with the effect, that flags it *partial*
 (when it is also at least a quarter of the effect's own gain)."""
+
+CONSTANT_ERROR = "a constant error"  # the cause the offset check gives (the message's --offset advice looks for it)
 
 _LS = Loss.least_squares()
 
@@ -298,10 +303,11 @@ def diagnose(
     probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
     probes, floored = _probes_within_resolution(ds, probes, e0, loss)
     checks += floored
-    constant = [c.effect for c in ranking if c.reason and "a constant error" in c.reason]
+    constant = [c.effect for c in ranking if c.reason and CONSTANT_ERROR in c.reason]
     if constant:
         checks += (f"{', '.join(constant)} lose their gain with a constant offset in the model, which it lacks: "
-                   "rerun with --offset on (an encoder's zero, or a dead zone under a load of one sign)",)
+                   "rerun the diagnosis with --offset on (an encoder's zero, or a dead zone under a load of one "
+                   "sign; a motor model for control takes no offset)",)
     d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
     if d.verdict != "missing_effect" or not next_effect:
         return d
@@ -331,22 +337,25 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
     offset = None
     if ds.actuator and OFFSET not in spec.linear:
         offset = replace(spec, linear=(*spec.linear, OFFSET))
-    while ranking and ranking[0].testable and ranking[0].family == "dynamics" \
-            and ranking[0].heldout_gain >= min_gain and ranking[0].consistent:
-        top = ranking[0]
+    while True:
+        i = next((k for k, c in enumerate(ranking) if nameable(c, min_gain)), None)
+        if i is None or ranking[i].family != "dynamics":
+            break
+        top = ranking[i]
         derivatives = derivative_checks(ds) if derivatives is None else derivatives
-        alternatives = [(d, spec, f"with {how}") for d, how in derivatives]
+        alternatives = [(d, spec, f"with {how}", "the differentiation's error") for d, how in derivatives]
         if offset is not None:
-            alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)"))
+            alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)",
+                                 CONSTANT_ERROR))
         if not alternatives:
             break
         eff = resolve_effects([top.effect])[0]
-        g, how = min(((_gain_with(d, sp, eff, loss, folds), how) for d, sp, how in alternatives), key=lambda x: x[0])
+        g, how, cause = min(((_gain_with(d, sp, eff, loss, folds), how, cause) for d, sp, how, cause in alternatives),
+                            key=lambda x: x[0])
         if g >= min_gain:
             break
-        cause = "the differentiation's error" if "dq" in how else "a constant error"
-        ranking[0] = replace(top, testable=False, reason=(
-            f"cannot tell: may be {cause} (held-out gain {100 * g:.0f} % {how})"))
+        ranking[i] = replace(top, testable=False, reason=f"cannot tell: may be {cause} (held-out gain {100 * g:.0f} % "
+                                                         f"{how})")
         ranking.sort(key=_order)
     return ranking
 
@@ -378,8 +387,16 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
                            partial=False, remaining=None))
     out = sorted(_within_resolution(ds, out, e0, loss, min_gain), key=_order)
     out = _checked(ds, with_top, out, loss, folds, min_gain)
-    best = out[0] if out else None
-    return best if best is not None and best.testable and best.heldout_gain >= min_gain and best.consistent else None
+    best = next((c for c in out if nameable(c, min_gain)), None)
+    if best is None:
+        return None
+    eff = resolve_effects([best.effect])[0]
+    full, e_train = _full_fit(ds, with_top, eff, loss, cache)  # shape and coefficient over the model with top
+    train0 = error_of(y - fit_spec(ds.signals, y, with_top, loss, cache=cache).predict(ds.signals), y, loss)
+    shape = full.spec.terms[-1].shape
+    return replace(best, shape=dict(shape), coefficient=full.coefficients[eff.name],
+                   train_gain=1.0 - e_train / train0 if train0 > 0 else 0.0,
+                   at_grid_edge=_grid_edge(eff, shape, ds.signals))
 
 
 def _floor(ds: Dataset, loss: Loss) -> float:

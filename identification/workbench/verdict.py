@@ -156,7 +156,7 @@ class Diagnosis:
     def top(self) -> Candidate | None:
         """The named effect (the best testable one that clears ``min_gain`` in enough blocks), else the best
         testable one if it is first in the ranking."""
-        named = next((c for c in self.ranking if _nameable(c, self.min_gain)), None)
+        named = next((c for c in self.ranking if nameable(c, self.min_gain)), None)
         if named is not None:
             return named
         return self.ranking[0] if self.ranking and self.ranking[0].testable else None
@@ -199,7 +199,7 @@ class Diagnosis:
         }
 
 
-def _nameable(c: Candidate, min_gain: float) -> bool:
+def nameable(c: Candidate, min_gain: float) -> bool:
     """The verdict may name ``c``: testable, removes ``min_gain`` of the held-out error, helps in enough blocks."""
     return c.testable and c.heldout_gain >= min_gain and c.consistent
 
@@ -224,11 +224,11 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
                    ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...]]:
     """``probes`` with the gains of ``CHECKED_PROBES`` that would call the log ``unexplained`` (no effect named)
     replaced by the smallest of theirs and the same probe's with each less biased derivative
-    (:func:`~.data.derivative_checks`);
+    (:func:`~.checks.derivative_checks`);
     and a sentence per probe that fell below the threshold. Unchanged when an effect is named, no such probe
     reaches ``PROBE_FACTOR * min_gain`` or the velocity is the log's own."""
     out = dict(probes)
-    if any(_nameable(c, min_gain) for c in ranking):
+    if any(nameable(c, min_gain) for c in ranking):
         return out, ()
     todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
     checks = derivative_checks(ds) if todo else []
@@ -258,7 +258,7 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
 
 def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str, ...] = (),
                then: Candidate | None = None) -> Diagnosis:
-    named = [c for c in ranking if _nameable(c, min_gain)]
+    named = [c for c in ranking if nameable(c, min_gain)]
     experiments = {}
     confusion = None
     if named:

@@ -8,7 +8,7 @@ single-joint layout). The truth (which effects are hidden) rides in a side dict,
 Plant (angles and torques on the joint side of the gear, SI units)::
 
     command        r(t) = q_des(t - d)                                  d: delay (0 unless 'delay')
-    servo (PD)     u = K_eff (r - q_m) - D dq_m,  K_eff = K (1 - a_th H)  (H: heat, 'thermal_drift')
+    servo (PD)     u = (1 - a_th H) (K (r - q_m) - D dq_m)  (H: heat, 'thermal_drift': the torque constant falls)
     driver         u' = dz(u, delta)              dead zone of the driver ('deadzone'), else u' = u
     motor          T_m dtau_m/dt = u' - tau_m     first-order current loop ('motor_lag'), else tau_m = u';
                                                   T_m 3 .. 30 ms, at most 0.7 D / K (the loop stays stable)
@@ -234,8 +234,7 @@ def simulate(plants: list[Plant], duration: float = DURATION, *, dt: float = DT)
     n_rec = steps // every
     rec = {k: np.empty((n, n_rec)) for k in ("q", "dq", "tau", "tau_m", "heat")}
     for i in range(steps):
-        k_eff = K * (1 - g_drop * heat)
-        u = k_eff * (cmd_srv[:, i] - q_m) - D * v_m
+        u = (1 - g_drop * heat) * (K * (cmd_srv[:, i] - q_m) - D * v_m)
         u = np.where(dz_delta > 0, _dz(u, dz_delta), u)
         tau_m = np.clip(tau_m + lag_a * (u - tau_m), -tau_max, tau_max)
         s = np.tanh(v_m / v_eps)

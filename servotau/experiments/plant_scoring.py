@@ -16,7 +16,7 @@ Per log: the hidden effect(s) (from the side dict), the workbench's verdict and 
   the detectable effects only, counts the undetectable ones per effect, and lists the detectable misses (not
   ranked first or second): the workbench's own failures. The raw scores count every hidden effect;
 - everything per part (``PARTS``, fixed seed ranges: ``tuning`` 0-49, tuned on; ``held_out`` 50-99, not tuned on
-  but looked at per seed; ``unseen`` from 100, which nobody tunes on or looks at per seed) and per sample-period
+  but looked at per seed; ``unseen`` 100-999, which nobody tunes on or looks at per seed) and per sample-period
   band.
 
 The ``unseen`` part stays unseen: :func:`run_family` reports its logs only as a counter, and its scores carry no
@@ -39,7 +39,8 @@ from .plant_oracle import effect_residuals, oracle_gain, paper_fit, singles
 # any name that mentions viscous or power (the library's is viscous_power; a user's variant counts too).
 ACCEPT: dict[str, tuple[str, ...]] = {e: (e,) for e in EFFECTS}
 BANDS = ((1, 2, "1-2 ms"), (3, 6, "3-6 ms"), (7, 16, "7-16 ms"))
-PARTS = (("tuning", 0, 50), ("held_out", 50, 100), ("unseen", 100, None))  # [first seed, end) of each part
+PARTS = (("tuning", 0, 50), ("held_out", 50, 100), ("unseen", 100, 1000), ("tests", 1000, None))
+"""[first seed, end) of each part; the tests draw their plants from 1000 up (looked at per seed)."""
 UNSEEN = "unseen"  # the part nobody tunes on or looks at per seed
 BATCH = 32  # plants simulated side by side
 
@@ -297,7 +298,8 @@ def score(rows: list[dict], min_gain: float | None = None) -> dict:
     if min_gain is None:
         from servotau.identification.workbench import MIN_GAIN as min_gain
     out = {}
-    for part in [name for name, _lo, _hi in PARTS if name != UNSEEN or any(r["part"] == UNSEEN for r in rows)]:
+    shown = [name for name, _lo, _hi in PARTS if name in ("tuning", "held_out") or any(r["part"] == name for r in rows)]
+    for part in shown:
         sub = [r for r in rows if r["part"] == part]
         s = _score_rows(sub)
         s["detectable"] = detectable(sub, min_gain)
