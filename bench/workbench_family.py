@@ -9,8 +9,8 @@ and per sample-period band, the confusion matrix, seconds. The parts are fixed s
 
 - tuning: seeds 0-49, which the workbench was tuned on;
 - held_out: seeds 50-99, not tuned on, but looked at per seed;
-- unseen: seeds 100-999 (the tests use 1000 and up), which nobody tunes on or looks at per seed: their progress is a counter, their misses
-  are counted not listed, and ``--rows`` leaves them out unless ``--reveal-unseen``.
+- unseen: seeds 100-999 (the tests use 1000 and up), which nobody tunes on or looks at per seed: their progress is a
+  counter, their misses are counted not listed, and ``--rows`` leaves them out unless ``--reveal-unseen``.
 
 ``--n 100`` runs the tuning and held-out parts, ``--n 150`` all three. Each part's ``detectable`` section repeats
 the scores on the hidden effects an oracle could detect (the exact error the effect adds, from the plant's true
