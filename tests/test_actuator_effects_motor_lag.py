@@ -34,3 +34,15 @@ def test_a_current_loop_lag_of_an_independent_plant_is_named_with_its_time_const
     assert d.verdict == "missing_effect" and d.top.effect == "motor_lag"
     t_fit = -d.top.coefficient * d.top.shape["time_constant"]
     assert abs(t_fit / plant.effect["motor_lag"]["T"] - 1) < 0.25
+
+
+def test_a_model_without_k_tau_cannot_test_a_torque_lag():
+    """A model of the servo error without k_tau (a torque column the user left out) gives motor_lag a zero column:
+    it is untestable, saying it needs k_tau."""
+    from support.synthetic import synthetic_table
+
+    from servotau.identification.workbench.model import ModelSpec
+
+    ds = load_dataset(synthetic_table())
+    d = diagnose(ds, ModelSpec(("k_v",), ()), effects=["motor_lag", "coulomb"])
+    assert "needs k_tau" in d.candidate("motor_lag").reason

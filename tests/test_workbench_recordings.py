@@ -138,3 +138,14 @@ def test_a_signal_derived_in_some_recordings_only_is_said_and_not_checked():
     ds = combine([load_dataset(_log(8, 900)), load_dataset(_log(9, 800), smooth_torque_s=0)])
     assert ds.preprocessing["tau"] == {"source": "mixed", "sources": ("smoothed", "not derived")}
     assert any(n.startswith("tau: the recordings differ: 0: smoothed, 1: not derived") for n in ds.notes)
+
+
+def test_the_coarsest_encoder_of_the_recordings_sets_the_rounding_floor():
+    """A quantised recording joined with an unquantised one: the joined log keeps the quantised one's resolution
+    (the floor no effect is named within) and says that the recordings differ."""
+    coarse, fine = _log(4, 1200), _log(5, 1000)
+    res = 2 * np.pi / 2**13
+    coarse = {**coarse, "q": np.round(coarse["q"] / res) * res}
+    ds = combine([load_dataset(coarse), load_dataset(fine)])
+    assert ds.preprocessing["q"] == {"source": "log", "resolution": pytest.approx(res)}
+    assert any(n.startswith("q: the recordings' encoder resolutions differ") for n in ds.notes)

@@ -61,7 +61,7 @@ import numpy as np
 
 from servotau.actuator import Effect, Loss, excitation_report, resolve_effects
 from servotau.actuator.excitation import units_plausible
-from servotau.actuator.terms import OFFSET
+from servotau.actuator.terms import K_TAU, OFFSET
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
@@ -252,6 +252,9 @@ def diagnose(
         missing = [s for s in eff.signals if s not in ("u", "u_tau", "u_v") and s not in ds.signals]
         if missing:
             ranking.append(_untestable(eff, f"needs signal(s) {missing}: not in the log"))
+            continue
+        if "u_tau" in eff.signals and "u" not in eff.signals and K_TAU not in spec.linear:
+            ranking.append(_untestable(eff, "needs k_tau in the model: it acts on the torque part k_tau tau"))
             continue
         reason = units_plausible(exc) or (eff.needs(exc) if eff.needs is not None else None)
         pred, failures = _score_effect(ds, eff, bases, loss, cache)

@@ -80,6 +80,14 @@ def _preprocessing(datasets: Sequence[Dataset], offsets, notes: list[str]) -> di
     out: dict[str, dict] = {}
     for key in dict.fromkeys(k for d in datasets for k in d.preprocessing):
         infos = [d.preprocessing.get(key, {}) for d in datasets]
+        if key == "q":  # the encoder's resolution: the coarsest recording's sets the rounding floor
+            res = [float(i.get("resolution", 0.0)) for i in infos]
+            out[key] = {"source": "log", "resolution": max(res)}
+            if len(set(res)) > 1:
+                notes.append("q: the recordings' encoder resolutions differ (" + ", ".join(
+                    f"{i}: {r:.3g} rad" if r else f"{i}: not quantised" for i, r in enumerate(res))
+                    + f"): the coarsest, {max(res):.3g} rad, sets the rounding floor")
+            continue
         sources = [i.get("source", "not derived") for i in infos]
         if len(set(sources)) > 1:
             out[key] = {"source": "mixed", "sources": tuple(sources)}
