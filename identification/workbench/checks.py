@@ -28,14 +28,19 @@ def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int | 
     velocity is the log's own or no window can shrink. A joined log shrinks each recording's own window (the
     ``windows`` of its preprocessing; the windows as text when they differ, :func:`windows_text`). The check of
     :func:`~.diagnose.diagnose` that a lag-like effect is not the differentiation's own lag."""
-    info = ds.preprocessing.get("dq", {})
-    if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
+    if not _differentiated_here(ds):
         return None
     parts = recording_windows(ds)
     fast = [min(w, max(FAST_MIN_WINDOW, int(round(factor * w)) | 1)) for _, w, _ in parts]
     if fast == [w for _, w, _ in parts]:
         return None
     return with_derivatives(ds, fast), fast[0] if len(set(fast)) == 1 else windows_text(fast)
+
+
+def _differentiated_here(ds: Dataset) -> bool:
+    """The velocity is the workbench's derivative of ``q`` (not the log's own), so it can be differentiated again."""
+    return ds.preprocessing.get("dq", {}).get("source") == "derivative of q" and ds.dt is not None \
+        and "q" in ds.signals
 
 
 def recording_windows(ds: Dataset) -> list[tuple[int, int, float]]:
@@ -71,10 +76,9 @@ def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:
     coarse sample periods, where even 3 samples span the servo's transients, a shorter window is not enough).
     Empty when the velocity is the log's own. The checks of :func:`~.diagnose.diagnose` that a lag-like effect
     or a probe is not the differentiation's own error."""
-    info = ds.preprocessing.get("dq", {})
-    if info.get("source") != "derivative of q" or ds.dt is None or "q" not in ds.signals:
+    if not _differentiated_here(ds):
         return []
-    w0 = info["window"]
+    w0 = ds.preprocessing["dq"]["window"]
     out = []
     fast = faster_derivative(ds)
     if fast is not None:

@@ -184,6 +184,16 @@ def _fold_errors(y: np.ndarray, pred: np.ndarray, folds: list[Fold], loss: Loss)
     return np.array([error_of(y[f.test] - pred[f.test], y[f.test], loss) for f in folds])
 
 
+def _heldout_gain(y: np.ndarray, pred: np.ndarray, e0: float, e0_folds: np.ndarray, folds: list[Fold], loss: Loss
+                  ) -> tuple[float, float, tuple[float, ...], bool]:
+    """Of a held-out prediction against the model's (error ``e0``, per block ``e0_folds``): its error, the gain
+    ``1 - e1 / e0``, the gain per block, and whether it helps in every block but at most one."""
+    e1 = error_of(y - pred, y, loss)
+    fold_gains = 1.0 - _fold_errors(y, pred, folds, loss) / np.where(e0_folds > 0, e0_folds, 1.0)
+    consistent = bool(np.count_nonzero(fold_gains > 0) >= len(folds) - 1)
+    return e1, 1.0 - e1 / e0 if e0 > 0 else 0.0, tuple(float(g) for g in fold_gains), consistent
+
+
 def _full_fit(ds: Dataset, spec: ModelSpec, effect: Effect, loss: Loss, cache: dict) -> tuple[FittedModel, float]:
     """Base + effect on all samples at the shape of least training error; its training error."""
     resolved = resolve_shapes(ds.signals, ds.target, spec.plus(Term(effect.name)), loss, cache)
@@ -261,15 +271,13 @@ def diagnose(
         if np.isnan(pred).any():
             ranking.append(_untestable(eff, f"no shape could be fitted: {failures[0] if failures else '?'}"))
             continue
-        e1 = error_of(y - pred, y, loss)
-        fold_gains = 1.0 - _fold_errors(y, pred, folds, loss) / np.where(e0_folds > 0, e0_folds, 1.0)
+        e1, gain, fold_gains, consistent = _heldout_gain(y, pred, e0, e0_folds, folds, loss)
         try:
             full, e_train = _full_fit(ds, spec, eff, loss, cache)
             shape, coef = full.spec.terms[-1].shape, full.coefficients[eff.name]
         except IdentificationError as exc_:
             shape, coef, e_train = {}, float("nan"), train0
             failures.append(str(exc_))
-        gain = 1.0 - e1 / e0 if e0 > 0 else 0.0
         probe = probes.get(eff.family)
         explained = None if probe is None or probe <= 0 else min(gain / probe, 1.0) if gain > 0 else 0.0
         ranking.append(Candidate(
@@ -277,8 +285,8 @@ def diagnose(
             heldout_gain=gain,
             heldout_error=e1,
             train_gain=1.0 - e_train / train0 if train0 > 0 else 0.0,
-            fold_gains=tuple(float(g) for g in fold_gains),
-            consistent=bool(np.count_nonzero(fold_gains > 0) >= len(folds) - 1),
+            fold_gains=fold_gains,
+            consistent=consistent,
             shape=dict(shape),
             coefficient=coef,
             at_grid_edge=_grid_edge(eff, shape, ds.signals),
@@ -383,11 +391,9 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
         pred, _ = _score_effect(ds, resolve_effects([c.effect])[0], bases, loss, cache)
         if np.isnan(pred).any():
             continue
-        e1 = error_of(y - pred, y, loss)
-        fold_gains = 1.0 - _fold_errors(y, pred, folds, loss) / np.where(e0_folds > 0, e0_folds, 1.0)
-        out.append(replace(c, heldout_gain=1.0 - e1 / e0, heldout_error=e1, fold_gains=tuple(map(float, fold_gains)),
-                           consistent=bool(np.count_nonzero(fold_gains > 0) >= len(folds) - 1), explained=None,
-                           partial=False, remaining=None))
+        e1, gain, fold_gains, consistent = _heldout_gain(y, pred, e0, e0_folds, folds, loss)
+        out.append(replace(c, heldout_gain=gain, heldout_error=e1, fold_gains=fold_gains, consistent=consistent,
+                           explained=None, partial=False, remaining=None))
     out = sorted(_within_resolution(ds, out, e0, loss, min_gain), key=_order)
     out = _checked(ds, with_top, out, loss, folds, min_gain)
     best = next((c for c in out if nameable(c, min_gain)), None)
@@ -418,13 +424,18 @@ def _within_resolution(ds: Dataset, ranking: list[Candidate], e0: float, loss: L
         return ranking
     out = []
     for c in ranking:
-        removed = math.sqrt(max(e0 ** 2 - c.heldout_error ** 2, 0.0)) if c.testable else math.inf
+        removed = _removed(e0, c.heldout_error)
         if c.testable and c.heldout_gain >= min_gain and removed <= floor:
             c = replace(c, testable=False, reason=(
                 f"cannot tell: removes {1e6 * removed:.3g} urad RMS, within the encoder's rounding error "
                 f"({1e6 * floor:.3g} urad RMS, resolution {ds.preprocessing['q']['resolution']:.3g} rad)"))
         out.append(c)
     return out
+
+
+def _removed(e0: float, e1: float) -> float:
+    """The error [RMS] a term removes when it takes the held-out error from ``e0`` to ``e1``."""
+    return math.sqrt(max(e0 ** 2 - e1 ** 2, 0.0))
 
 
 def _probes_within_resolution(ds: Dataset, probes: dict[str, float], e0: float, loss: Loss
@@ -436,7 +447,7 @@ def _probes_within_resolution(ds: Dataset, probes: dict[str, float], e0: float, 
         return probes, ()
     out, notes = dict(probes), []
     for k, g in probes.items():
-        removed = e0 * math.sqrt(max(1.0 - (1.0 - g) ** 2, 0.0)) if g > 0 else 0.0
+        removed = _removed(e0, e0 * (1.0 - g)) if g > 0 else 0.0
         if 0 < removed <= floor:
             out[k] = 0.0
             if g >= 0.05:
