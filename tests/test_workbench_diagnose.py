@@ -274,3 +274,12 @@ def test_a_constant_error_is_not_named_as_a_lag():
     assert "constant error" in d.candidate("delay").reason and any("--offset on" in c for c in d.checks), d.message
     with_offset = diagnose(ds, parse_spec("paper", ds.signals, offset=True))
     assert with_offset.verdict == "no_missing_effect", with_offset.message
+
+
+def test_a_torque_constant_falling_with_heat_is_named_in_the_gain_form():
+    """The servo needs more error for the same torque as the winding heats (the torque part scaled by 1 + a h):
+    thermal_drift is named in its gain form (-h u_tau), with the coefficient -a."""
+    drop = load_dataset(synthetic_table(lambda t, q, dq, tau: 0.05 * _heat(dq, tau) * K_TAU * tau))
+    d = diagnose(drop, parse_spec("coulomb", drop.signals), effects=["thermal_drift", "stribeck", "delay"])
+    assert d.top.effect == "thermal_drift" and d.top.shape["gain"] == 1.0, d.message
+    assert d.top.coefficient == pytest.approx(-0.05, rel=0.3)
