@@ -71,6 +71,8 @@ class Effect:
             evaluated on the current sample alone.
         history: The regressor reads past samples (needs a uniform sampling period).
         confusable: Effects whose columns may look alike on poor data (see ``experiments``).
+        nests: Effects this one contains as a special case (e.g. a Stribeck curve of level 1 is Coulomb friction):
+            the diagnosis ranks it above them only where its extra freedom pays in every held-out block.
         coefficient_range: ``(low, high)``: the coefficients the physics allows (e.g. a fraction); a shape whose
             fit gives a coefficient outside is not chosen (the term would be a generic correction, not the
             effect). None: any coefficient.
@@ -100,6 +102,7 @@ class Effect:
     online: Callable[[Mapping[str, float], float], OnlineTerm] | None = None
     history: bool = False
     confusable: tuple[str, ...] = ()
+    nests: tuple[str, ...] = ()
     coefficient_range: tuple[float, float] | None = None
     shape_signals: Callable[[Mapping[str, float]], Iterable[str]] | None = None
     scalar: Callable[..., float] | None = None
@@ -118,6 +121,7 @@ class Effect:
             object.__setattr__(self, "grid", _check_grid(self.name, self.grid))
         object.__setattr__(self, "signals", tuple(self.signals))
         object.__setattr__(self, "confusable", tuple(self.confusable))
+        object.__setattr__(self, "nests", tuple(self.nests))
         object.__setattr__(self, "signal_substitutes", dict(self.signal_substitutes))
         object.__setattr__(self, "experiments", dict(self.experiments))
         if self.family not in FAMILIES:
