@@ -16,15 +16,38 @@ from ..registry import Effect
 from ..signals import Signals
 
 ORDER = 90
-GRID = tuple({"period": p} for p in np.geomspace(0.01, 0.32, 11).round(4).tolist())  # [rad]
+PERIODS = (0.01, 0.32)  # [rad] the shortest and longest ripple periods tried
+COARSE = tuple({"period": p} for p in np.geomspace(*PERIODS, 11).round(4).tolist())  # [rad] without positions
 SAMPLES_PER_PERIOD = 4  # positions sampled per ripple period (at most the largest gap apart) that resolve a ripple
+DRIFT = 0.125  # [periods] the largest phase drift, at either end of the sweep, of a ripple half a grid step off
+
+
+def grid(s: Signals) -> tuple[dict[str, float], ...]:
+    """``COARSE`` and periods spaced so that a ripple between two of them drifts at most ``DRIFT`` of a period
+    against the nearer one over the log's position sweep (a step of ``4 DRIFT period / span``, at least 2 %): a
+    41 % step alone leaves a ripple of 10 periods or more in the sweep unfitted. The sweep's span [rad] is the
+    range of ``q``; without it, ``COARSE``."""
+    q = s.get("q")
+    span = float(np.ptp(q)) if q is not None and q.size > 1 else 0.0
+    if not span > 0:
+        return COARSE
+    periods, p = {g["period"] for g in COARSE}, PERIODS[0]
+    while p < PERIODS[1]:
+        periods.add(round(p, 6))
+        p *= 1.0 + max(4.0 * DRIFT * p / span, 0.02)
+    return tuple({"period": v} for v in sorted(periods))
+
+
+GRID = grid
 
 
 def cogging(s: Signals, period: float, phase: float = 0.0) -> np.ndarray:
     return np.sin(2.0 * math.pi * s["q"] / period + phase)
 
 
-def columns(s: Signals, period: float) -> np.ndarray:
+def columns(s: Signals, period: float, phase: float = 0.0) -> np.ndarray:
+    """Sine and cosine of the ripple (``phase``, which they fit, is ignored: the grid is a function, so a folded
+    shape keeps it)."""
     x = 2.0 * math.pi * s["q"] / period
     return np.column_stack([np.sin(x), np.cos(x)])
 
@@ -45,7 +68,7 @@ def needs(e: Excitation) -> str | None:
     if e.position_range[1] - e.position_range[0] < 0.05:
         return (f"position range {e.position_range[1] - e.position_range[0]:.3g} rad: expected >= 0.05 rad, a sweep "
                 "over several ripple periods")
-    longest = max(g["period"] for g in GRID)
+    longest = PERIODS[1]
     if e.position_gap is not None and e.position_gap * SAMPLES_PER_PERIOD > longest:
         return (f"cannot tell: the positions sampled leave gaps of {e.position_gap:.3g} rad: a ripple needs "
                 f">= {SAMPLES_PER_PERIOD} positions per period, so periods >= "

@@ -20,7 +20,7 @@ from ..signals import Signals, smooth_sign, smooth_sign_scalar
 
 ORDER = 30
 V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
-LEVELS = (0.0, 0.2, 0.4, 0.6)  # Coulomb friction / breakaway friction
+LEVELS = (0.0, 0.3, 0.6)  # Coulomb friction / breakaway friction
 GRID = tuple({"v_s": v, "v_eps": e, "level": c} for c in LEVELS for v in V_S for e in (0.005, 0.01, 0.02))
 
 

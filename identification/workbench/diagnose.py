@@ -296,7 +296,7 @@ def diagnose(
             explained=explained,
             partial=bool(explained is not None and explained < PARTIAL and probe - gain > 0.05),
         ))
-    ranking = _ranked(_within_resolution(ds, ranking, e0, loss, min_gain))
+    ranking = _ranked(_within_resolution(ds, ranking, e0, loss, min_gain), min_gain)
     ranking = _checked(ds, spec, ranking, loss, folds, min_gain)
     top = ranking[0] if ranking and ranking[0].testable else None
     if top is not None and top.heldout_gain >= min_gain and top.consistent and top.family in probes:
@@ -334,18 +334,17 @@ def _order(c: Candidate) -> tuple:
     return not c.testable, -c.heldout_gain if math.isfinite(c.heldout_gain) else math.inf
 
 
-def _ranked(candidates: list[Candidate]) -> list[Candidate]:
+def _ranked(candidates: list[Candidate], min_gain: float) -> list[Candidate]:
     """``candidates`` by :func:`_order`, where an effect that nests another (``Effect.nests``, e.g. the Stribeck
-    curve nests Coulomb friction) and would come before it moves just behind it unless it gains more in every
-    held-out block: its extra freedom has to pay everywhere, or the simpler effect is named."""
+    curve nests Coulomb friction) and would come before it moves just behind it unless its extra freedom removes
+    ``min_gain`` of the held-out error the nested effect leaves: the part it adds has to be nameable on its own,
+    or the simpler effect is named."""
     out = sorted(candidates, key=_order)
     for c in [c for c in out if c.testable]:
         for name in resolve_effects([c.effect])[0].nests:
             j = next((k for k, b in enumerate(out) if b.effect == name and b.testable), None)
             i = out.index(c)
-            pays = bool(c.fold_gains) and all(a > b for a, b in zip(c.fold_gains, out[j].fold_gains, strict=False)) \
-                if j is not None else True
-            if j is None or j < i or pays:
+            if j is None or j < i or c.heldout_gain - out[j].heldout_gain >= min_gain * (1.0 - out[j].heldout_gain):
                 continue
             out.insert(j, out.pop(i))
     return out
@@ -383,7 +382,7 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
             break
         ranking[i] = replace(top, testable=False, reason=f"cannot tell: may be {cause} (held-out gain {100 * g:.0f} % "
                                                          f"{how})")
-        ranking = _ranked(ranking)
+        ranking = _ranked(ranking, min_gain)
     return ranking
 
 
@@ -410,7 +409,7 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
         e1, gain, fold_gains, consistent = _heldout_gain(y, pred, e0, e0_folds, folds, loss)
         out.append(replace(c, heldout_gain=gain, heldout_error=e1, fold_gains=fold_gains, consistent=consistent,
                            explained=None, partial=False, remaining=None))
-    out = _ranked(_within_resolution(ds, out, e0, loss, min_gain))
+    out = _ranked(_within_resolution(ds, out, e0, loss, min_gain), min_gain)
     out = _checked(ds, with_top, out, loss, folds, min_gain)
     best = next((c for c in out if nameable(c, min_gain)), None)
     if best is None:
