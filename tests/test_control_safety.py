@@ -54,6 +54,9 @@ def _fault(check):
     est = _estimate()
     if check == "invalid_estimate":
         est.ddq[KNEE] = np.nan
+    elif check == "estimate_gap":  # the estimator after a gap longer than its max_gap: finite but invalid
+        est.valid, est.gap_flush = False, 80
+        return _frame(k), est, _ref(), ""
     elif check == "joint_velocity":
         est.dq[KNEE] = -6.0
     elif check == "joint_torque":
