@@ -15,6 +15,9 @@ Modes:
 - ``position``: ``q_des = q_ref`` (the native servo; the paper's baseline).
 - ``torque``: ``q_des = q + dq_err`` on torque-controlled joints (eq. 10-12, :mod:`.law`), ``q_ref`` elsewhere.
   ``q`` is the encoder reading of the frame (not the filtered estimate): the servo sees exactly ``dq_err``.
+- torque mode falls back to position control (bumpless) while the estimate is invalid after more skipped
+  frames than the estimator's ``max_gap`` (``gap_fallback = "position"``, counted in ``gap_fallbacks``; with
+  ``"trip"``: the ``estimate_gap`` trip), and returns to torque mode once it is valid again.
 - ``hold``: entered by a safety trip; ``q_des`` = the last valid measured angles at the trip, the torque terms
   zero, the integrals frozen. Every held tick the checks still run on the frame, the estimate and the held
   command, without latching: :attr:`ControlManager.condition` says whether the trip's cause is still there.
@@ -100,6 +103,7 @@ class ControlManager:
         self._q_good = np.clip(np.zeros(n), info.q_min, info.q_max)  # last finite encoder reading
         self._q_hold = np.zeros(n)
         self._cmd = np.zeros(n)
+        self.gap_fallbacks = 0  # torque mode fell back to position control after skipped frames (gap_fallback)
 
     @classmethod
     def from_toml(cls, info: RobotInfo, path: str | Path = DEFAULT_PATH) -> ControlManager:
@@ -204,15 +208,21 @@ class ControlManager:
         report = self.safety.check_frame(frame)
         if report is None and has_estimate:
             report = self.safety.check_estimate(frame, estimate.q, estimate.dq, estimate.ddq, estimate.tau)
-        if report is None and self._requested == Mode.TORQUE and not has_estimate:
+        mode = self._requested
+        if report is None and mode == Mode.TORQUE and not has_estimate:
             flush = int(getattr(estimate, "gap_flush", 0) or 0)
-            report = SafetyReport("estimate_gap", "", flush, 0.0, float(frame.time), int(frame.seq)) if flush else \
-                SafetyReport("invalid_estimate", "", math.nan, 0.0, float(frame.time), int(frame.seq))
+            if flush and self.config.gap_fallback == "position":
+                mode = Mode.POSITION  # until the estimate is valid again (bumpless both ways)
+                if self._mode == Mode.TORQUE:
+                    self.gap_fallbacks += 1
+            elif flush:
+                report = SafetyReport("estimate_gap", "", flush, 0.0, float(frame.time), int(frame.seq))
+            else:
+                report = SafetyReport("invalid_estimate", "", math.nan, 0.0, float(frame.time), int(frame.seq))
         if report is not None:
             return self._trip(frame, report)
         q = frame.q
         np.copyto(self._q_good, q)  # finite: checked above
-        mode = self._requested
         switching = mode != self._mode
         if switching and mode == Mode.TORQUE:
             self.law.reset()

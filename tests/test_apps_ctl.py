@@ -97,3 +97,25 @@ def test_ctl_without_an_answer_is_a_clear_error(tmp_path, capsys):
         assert ctl.main(args) == 2
     err = capsys.readouterr().err
     assert 'no robot of robot "fake" answered servotau/v1/fake/operator within 0.3 s' in err
+
+
+def test_the_exit_waits_for_the_threads_the_command_started():
+    """quiesce_threads joins the threads started since the snapshot (so none is in native code when the
+    interpreter finalizes) and names those that outlive the timeout; older threads are left alone."""
+    from servotau.apps.control import quiesce_threads
+
+    old_stop = threading.Event()
+    old = threading.Thread(target=old_stop.wait, daemon=True, name="older")
+    old.start()
+    before = {t.ident for t in threading.enumerate()}
+    quick = threading.Thread(target=lambda: threading.Event().wait(0.05), daemon=True, name="closing")
+    stuck_stop = threading.Event()
+    stuck = threading.Thread(target=stuck_stop.wait, daemon=True, name="stuck")
+    quick.start()
+    stuck.start()
+    try:
+        assert quiesce_threads(before, timeout=1.0) == ["stuck"]
+        assert not quick.is_alive() and old.is_alive()
+    finally:
+        stuck_stop.set()
+        old_stop.set()

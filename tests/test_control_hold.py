@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from servotau.control.loop import ControlLoop, LoopHook
+from servotau.control.manager import ControlManager
 from servotau.control.operator import OperatorChannel
 from servotau.control.terms import TORQUE_COMPONENTS
 from servotau.hal.backends.inprocess import InProcessBackend
@@ -102,9 +103,9 @@ class Recorder(LoopHook):
         self.trips.append((tick.frame.seq - self.backend.seq0, report.check, report.where))
 
 
-def _run(backend, operator=None, hold_timeout=None, duration=0.3, mode="torque"):
+def _run(backend, operator=None, hold_timeout=None, duration=0.3, mode="torque", manager=None):
     rec = Recorder(backend, operator)
-    loop = ControlLoop(backend, mode=mode, settle=SETTLE_S, hooks=[rec])
+    loop = ControlLoop(backend, manager, mode=mode, settle=SETTLE_S, hooks=[rec])
     rec.loop = loop
     try:
         result = loop.run(None, duration, operator=operator, hold_timeout=hold_timeout)
@@ -164,7 +165,9 @@ def test_hold_timeout_releases_by_itself_after_that_much_robot_time():
 
 def test_skipped_frames_in_torque_mode_are_counted_gaps_not_a_trip():
     """A late controller skips frames, also at the switch to torque mode: the estimate stays valid, the run
-    completes in robot time and counts the gaps; a gap longer than max_gap trips a clear estimate_gap check."""
+    completes in robot time and counts the gaps. After a gap longer than max_gap torque mode falls back to position
+    control until the estimate is valid again (one window), then resumes; with gap_fallback = "trip" the gap trips
+    a clear estimate_gap check instead."""
     skips = {99: 3, 140: 5, 200: 19}  # the first: the settle phase ends (tick 100) in the gap
     backend = Faulty(skip=skips)
     _, rec, result = _run(backend, None, duration=0.2)
@@ -173,7 +176,18 @@ def test_skipped_frames_in_torque_mode_are_counted_gaps_not_a_trip():
     assert result.robot_ticks == 300 and result.ticks == 300 - 27
     assert {r[1] for r in rec.rows if r[0] > 100} == {"torque"}
     backend = Faulty(skip={150: 30})
-    _, rec, result = _run(backend, None, hold_timeout=0.0, duration=0.2)
+    loop, rec, result = _run(backend, None, duration=0.3)
+    assert result.tripped is None and result.end == "completed" and loop.manager.gap_fallbacks == 1
+    modes = {r[0]: r[1] for r in rec.rows}
+    assert all(modes[i] == "torque" for i in range(101, 151))
+    assert all(modes[i] == "position" for i in range(181, 261)) and modes[261] == "torque"
+    assert all(modes[i] == "torque" for i in range(261, 400))
+    steps = np.abs(np.diff(np.array([r[2] for r in rec.rows if r[0] > 100]), axis=0)).max()
+    assert steps < 2e-3  # [rad] per tick: bumpless both ways (no jump of q_des)
+    backend = Faulty(skip={150: 30})
+    mgr = ControlManager.from_toml(backend.info)
+    mgr = ControlManager(backend.info, dataclasses.replace(mgr.config, gap_fallback="trip"))
+    _, rec, result = _run(backend, None, hold_timeout=0.0, duration=0.2, manager=mgr)
     assert rec.trips == [(181, "estimate_gap", "")] and "invalid for 80 more ticks" in result.tripped
 
 

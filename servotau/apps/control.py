@@ -23,6 +23,7 @@ import logging
 import signal
 import sys
 import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,7 @@ from servotau.errors import ControlError, HalError
 log = logging.getLogger(__name__)
 
 TAIL = 0.5  # [s] after the swing, still run and evaluated
+EXIT_JOIN_TIMEOUT = 2.0  # [s] wall time the exit waits for the closed backend's and log's threads to end
 TRIP_JOINT, TRIP_JUMP = "RLEG_JOINT3", 0.2  # --trip-at: the reference jump [rad] that trips the command check
 
 
@@ -51,6 +53,7 @@ class SessionResult:
     gaps: int = 0  # gaps of skipped frames
     missing_frames: int = 0
     longest_gap: int = 0  # [frames]
+    gap_fallbacks: int = 0  # torque mode fell back to position control after a gap longer than max_gap
 
 
 # -- hooks ----------------------------------------------------------------------------------------------
@@ -185,6 +188,7 @@ def run_session(backend, *, mode: str, duration: float, stream: RerunStream | No
         max_error={j: float(e) for j, e in zip(info.joint_names, error.max, strict=True)},
         tripped=result.tripped, end=result.end, resets=result.resets, gaps=result.gaps,
         missing_frames=result.missing_frames, longest_gap=result.longest_gap,
+        gap_fallbacks=loop.manager.gap_fallbacks,
     )
 
 
@@ -204,12 +208,36 @@ def serve_operator(backend, operator: OperatorChannel) -> str | None:
     return key
 
 
+def quiesce_threads(before: set[int] = frozenset(), timeout: float = EXIT_JOIN_TIMEOUT) -> list[str]:
+    """Wait (at most ``timeout`` [s] of wall time in all) for the Python threads started since ``before`` (thread
+    idents) to end; return the names of those still running.
+
+    Why: once the interpreter starts finalizing, CPython ends any thread that takes the GIL with
+    ``pthread_exit``; in a thread that is inside native code at that moment (zenoh's pyo3 bindings, e.g. the
+    backend's read-alarm thread in a ``put``, or a callback thread handing over a sample; pyarrow in a log
+    writer) the forced unwind crosses a Rust ``catch_unwind`` that swallows it, and glibc aborts the process
+    with "FATAL: exception not rethrown" (SIGABRT instead of the exit code). After the log, the stream and the
+    backend are closed, their threads end within a few milliseconds: joining them first leaves the interpreter
+    nothing to kill.
+    """
+    deadline = time.monotonic() + timeout
+    me = threading.current_thread()
+    ours = [t for t in threading.enumerate() if t is not me and t.ident not in before]
+    for t in ours:
+        t.join(max(deadline - time.monotonic(), 0.0))
+    left = [t.name for t in ours if t.is_alive()]
+    if left:
+        log.warning("threads still running at exit: %s", ", ".join(left))
+    return left
+
+
 def main(args) -> int:
     from servotau.hal.log import LogWriter
     from servotau.hal.registry import open_backend, overrides_from_args
 
     if args.hold_timeout is not None and not args.hold_timeout >= 0:
         raise ControlError(f"--hold-timeout {args.hold_timeout}: expected >= 0 [s]")
+    threads_before = {t.ident for t in threading.enumerate()}
     backend = open_backend(args.hal, **overrides_from_args(args))
     operator = OperatorChannel()
     writer = stream = None
@@ -239,10 +267,11 @@ def main(args) -> int:
                 stream.close()
         finally:
             backend.close()
+            quiesce_threads(threads_before)
     legs = [j for j in backend.info.joint_names if j.startswith("RLEG")]
     print(f"{result.ticks} ticks, {result.sim_seconds:.2f} s robot time in {result.wall_seconds:.2f} s wall "
           f"({result.sim_seconds / result.wall_seconds:.2f}x real time); {result.missing_frames} frames skipped in "
-          f"{result.gaps} gaps (longest {result.longest_gap})")
+          f"{result.gaps} gaps (longest {result.longest_gap}; {result.gap_fallbacks} fallbacks to position control)")
     print("max |q_ref - q| [mrad]: " + ", ".join(f"{j} {1e3 * result.max_error[j]:.1f}" for j in legs))
     if result.tripped:
         how = {"released": "released by the operator", "hold_timeout": "released after --hold-timeout"}
