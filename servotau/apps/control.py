@@ -274,7 +274,7 @@ def main(args) -> int:
           f"{result.gaps} gaps (longest {result.longest_gap}; {result.gap_fallbacks} fallbacks to position control)")
     print("max |q_ref - q| [mrad]: " + ", ".join(f"{j} {1e3 * result.max_error[j]:.1f}" for j in legs))
     if result.tripped:
-        how = {"released": "released by the operator", "hold_timeout": "released after --hold-timeout"}
+        how = {"released": "released: servotau ctl release or SIGTERM", "hold_timeout": "released after --hold-timeout"}
         print(f"safety trip: {result.tripped} ({how.get(result.end, result.end)}; {result.resets} resets)",
               file=sys.stderr)
         return 3
