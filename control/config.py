@@ -159,6 +159,9 @@ class ControlConfig:
     fade_time: float = setting(0.5, unit="s", min=0)  # the bumpless-switch offset fades to zero over this time
     velocity_feedforward: str = setting("estimate", choices=VELOCITY_FEEDFORWARDS)  # velocity the feedforward reads
     rest_velocity: float = setting(0.001, unit="rad/s", min=0, strict_min=True)  # position integral while |dq_d| <
+    # torque mode, the estimate invalid after more skipped frames than the estimator's max_gap: "position" =
+    # position control (bumpless) until the estimate is valid again, then torque mode again; "trip" = a safety trip
+    gap_fallback: str = setting("position", choices=("position", "trip"))
     source: str = "<direct>"  # file the config came from
     _torque_mask: np.ndarray = field(default=None, repr=False, compare=False)
 

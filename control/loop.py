@@ -15,17 +15,27 @@ Phases:
   pass ``ft_offsets``) and set in the estimator, so that the F/T filter refills with compensated readings.
 - reference: the run's ``mode`` is requested on the first tick after the settle phase (the manager
   switches bumplessly), then ``reference(tick)`` gives the desired joint state every tick until
-  ``duration`` [s] has passed or the safety monitor trips (the manager holds the measured position; the
-  loop writes that command and stops).
+  ``duration`` [s] of robot time has passed or the safety monitor trips.
+- hold (after a trip): the manager holds the last valid measured posture (torque terms zero, integrals
+  frozen) and the loop keeps answering every frame, reporting the trip once (:meth:`LoopHook.tripped`),
+  until an operator acts through an :class:`~servotau.control.operator.OperatorChannel`: ``reset`` (refused
+  while the trip's cause is still there) goes back to position control at the held posture, which the loop
+  then keeps; ``release`` ends the run. ``hold_timeout`` [s] of robot time without a release ends it too
+  (default 0: the loop stops on the tripping tick, after writing the hold).
+
+Time is the robot's: a tick's ``t`` and the phases count robot ticks from the first frame (``frame.seq``), so
+frames skipped by a late controller shorten neither the settle phase nor the run, and the estimator fills
+them in as a counted gap (:mod:`servotau.estimation.estimator`).
 
 Each tick, in this order: (calibration,) ``estimator.update(frame)``, (the mode request and
 :meth:`LoopHook.settled`,) the reference, :meth:`LoopHook.before_control`, ``manager.tick``,
 ``backend.write``, ``backend.ground_truth()`` (only if a hook ``wants_truth``), :meth:`LoopHook.on_tick`,
-the trip check, ``backend.read()``.
+the trip check (and :meth:`LoopHook.tripped`), the operator's action, ``backend.read()``.
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -36,8 +46,12 @@ from servotau.estimation import Estimate, EstimatorConfig, TorqueEstimator, cali
 from servotau.hal.types import SensorFrame
 
 from .manager import ControlManager, Mode
+from .operator import OperatorChannel
+from .safety import SafetyReport
 from .terms import ControlTerms
 from .trajectory import TrajectoryPoint
+
+log = logging.getLogger(__name__)
 
 SETTLE = 0.5  # [s] in position mode before the run's mode: filters fill, F/T offsets are calibrated
 ESTIMATOR_VARIANT = "low_delay"  # the estimator variant the torque controller is stable with in simulation
@@ -57,7 +71,7 @@ class Tick:
     """
 
     k: int  # tick index from the loop's first read
-    t: float  # [s] from the end of the settle phase ((k - settle_ticks) * period; negative while settling)
+    t: float  # [s] robot time from the end of the settle phase ((robot ticks - settle_ticks) * period; < 0: settling)
     frame: SensorFrame  # what the robot sent this tick
     estimate: Estimate  # the estimator's output for ``frame`` (check ``estimate.valid``)
     reference: TrajectoryPoint | None = None  # desired q, dq, ddq of this tick (set before the control tick)
@@ -87,18 +101,28 @@ class LoopHook:
     def on_tick(self, tick: Tick) -> None:
         """After the command is written (``tick.terms`` set; ``tick.truth`` if ``wants_truth``)."""
 
+    def tripped(self, tick: Tick, report: SafetyReport) -> None:
+        """Once per safety trip, on the tripping tick, after :meth:`on_tick` (the hold is written)."""
+
 
 @dataclass(frozen=True)
 class LoopResult:
-    ticks: int  # ticks run (the tripping tick included)
+    ticks: int  # ticks run (the tripping tick and the held ticks included)
     period: float  # [s]
     wall_seconds: float  # [s] wall time of the run
-    tripped: str | None  # the safety report's message, or None
+    tripped: str | None  # the first safety report's message, or None
+    robot_ticks: int = 0  # robot ticks from the first frame to the last (ticks + skipped frames)
+    end: str = "completed"  # "completed" (the run's duration), "released" (by the operator), "hold_timeout"
+    trips: int = 0  # safety trips (a reset hold can trip again)
+    resets: int = 0  # trips cleared by an operator's reset
+    gaps: int = 0  # gaps of skipped frames (the estimator's count)
+    missing_frames: int = 0  # frames skipped in them
+    longest_gap: int = 0  # [frames]
 
     @property
     def sim_seconds(self) -> float:
         """[s] robot time of the run."""
-        return self.ticks * self.period
+        return self.robot_ticks * self.period
 
 
 Reference = Callable[[Tick], TrajectoryPoint]
@@ -143,8 +167,17 @@ class ControlLoop:
             self.hold = TrajectoryPoint(self._frame.q.copy(), np.zeros(n), np.zeros(n))
         return self._frame
 
-    def run(self, reference: Reference | None, duration: float) -> LoopResult:
-        """Settle, then ``duration`` [s] in the run's mode following ``reference(tick)`` (None: hold the start).
+    def run(self, reference: Reference | None, duration: float, *, operator: OperatorChannel | None = None,
+            hold_timeout: float | None = 0.0) -> LoopResult:
+        """Settle, then ``duration`` [s] of robot time in the run's mode following ``reference(tick)`` (None: hold
+        the start); after a safety trip, the latched hold (module doc) until the operator or ``hold_timeout``.
+
+        Args:
+            reference: The desired joint state of each tick after the settle phase.
+            duration: [s] robot time after the settle phase.
+            operator: Where an operator's ``reset``/``release``/``status`` arrive (:mod:`.operator`), or None.
+            hold_timeout: [s] robot time the loop keeps holding after a trip (or after a reset) before it releases
+                by itself; None: until the operator releases; 0 (default): it stops on the tripping tick.
 
         Raises:
             HalError: The robot is lost (from ``read``/``write``).
@@ -156,34 +189,91 @@ class ControlLoop:
         clock = time.perf_counter_ns
         settle_frames: list[SensorFrame] = []
         total = n_settle + int(round(duration / dt))
+        seq0 = frame.seq
+        state = "settling" if n_settle else "running"
+        calibrated, settled = n_settle == 0, False
+        held: TrajectoryPoint | None = None  # the posture held since a trip (also after a reset)
+        t_hold = 0.0  # [s] robot time the current hold started (trip or reset)
+        first_trip: str | None = None
+        trips = resets = 0
+        end = "completed"
+        if operator is not None:
+            operator.publish(state)
         t_wall = time.perf_counter()
-        k = -1
-        for k in range(total):
-            if k == n_settle - 1:
-                estimator.set_ft_offsets(self._ft_offsets(settle_frames))
-            if k < n_settle:
-                settle_frames.append(frame)
-            t0 = clock()
-            estimate = estimator.update(frame)
-            tick = Tick(k, (k - n_settle) * dt, frame, estimate, estimation_ns=clock() - t0)
-            if k == n_settle:
-                if self.mode != Mode.POSITION:
-                    manager.request_mode(self.mode)
+        k, i = -1, 0
+        try:
+            while True:
+                k += 1
+                i = frame.seq - seq0  # robot ticks since the first frame: frames may be skipped
+                if not calibrated and i >= n_settle - 1:
+                    estimator.set_ft_offsets(self._ft_offsets(settle_frames))
+                    calibrated = True
+                if i < n_settle:
+                    settle_frames.append(frame)
+                t0 = clock()
+                estimate = estimator.update(frame)
+                tick = Tick(k, (i - n_settle) * dt, frame, estimate, estimation_ns=clock() - t0)
+                if not settled and i >= n_settle:
+                    settled = True
+                    if state == "settling":
+                        state = "running"
+                    if self.mode != Mode.POSITION and not manager.tripped:
+                        manager.request_mode(self.mode)
+                    for h in hooks:
+                        h.settled(tick)
+                if held is not None:
+                    tick.reference = held
+                elif i < n_settle or reference is None:
+                    tick.reference = self.hold
+                else:
+                    tick.reference = reference(tick)
                 for h in hooks:
-                    h.settled(tick)
-            tick.reference = self.hold if k < n_settle or reference is None else reference(tick)
-            for h in hooks:
-                h.before_control(tick)
-            t0 = clock()
-            tick.terms = terms = manager.tick(frame, estimate if estimate.valid else None, tick.reference)
-            tick.control_ns = clock() - t0
-            backend.write(dict(zip(names, terms.q_des, strict=True)))
-            if truth_wanted:
-                tick.truth = backend.ground_truth()
-            for h in hooks:
-                h.on_tick(tick)
-            if manager.tripped:
-                break
-            frame = backend.read()
-        return LoopResult(ticks=k + 1, period=dt, wall_seconds=time.perf_counter() - t_wall,
-                          tripped=manager.report.message if manager.tripped else None)
+                    h.before_control(tick)
+                t0 = clock()
+                tick.terms = terms = manager.tick(frame, estimate, tick.reference)  # used only if valid
+                tick.control_ns = clock() - t0
+                backend.write(dict(zip(names, terms.q_des, strict=True)))
+                if truth_wanted:
+                    tick.truth = backend.ground_truth()
+                for h in hooks:
+                    h.on_tick(tick)
+                if manager.tripped and state != "tripped":  # a new trip: latch, report once
+                    state, trips, t_hold = "tripped", trips + 1, float(frame.time)
+                    first_trip = first_trip or manager.report.message
+                    n = self.info.nq
+                    held = TrajectoryPoint(manager.hold_posture.copy(), np.zeros(n), np.zeros(n))
+                    for h in hooks:
+                        h.tripped(tick, manager.report)
+                if operator is not None:
+                    operator.publish(state, manager.report.message if manager.tripped else None)
+                    pending = operator.take()
+                    if pending is not None:
+                        if pending.action == "release":
+                            operator.answer(pending, True, "released")
+                            end = "released"
+                            break
+                        if state == "tripped":  # reset
+                            refusal = manager.try_reset()
+                            if refusal is None:
+                                state, resets, t_hold = "holding", resets + 1, float(frame.time)
+                                log.warning("operator reset at t = %.3f s: position control at the held posture",
+                                            frame.time)
+                            operator.answer(pending, refusal is None, state, refusal)
+                        else:
+                            operator.answer(pending, True, state, None)  # nothing latched: nothing to reset
+                if state in ("tripped", "holding"):
+                    if hold_timeout is not None and float(frame.time) - t_hold >= hold_timeout - 1e-9:
+                        end = "hold_timeout"
+                        if hold_timeout > 0:
+                            log.warning("no operator release within hold_timeout = %g s of robot time: releasing",
+                                        hold_timeout)
+                        break
+                elif i >= total - 1:
+                    break
+                frame = backend.read()
+        finally:
+            if operator is not None:
+                operator.close({"completed": "done"}.get(end, "released"))
+        return LoopResult(ticks=k + 1, period=dt, wall_seconds=time.perf_counter() - t_wall, tripped=first_trip,
+                          robot_ticks=i + 1, end=end, trips=trips, resets=resets, gaps=estimator.gaps,
+                          missing_frames=estimator.missing_frames, longest_gap=estimator.longest_gap)

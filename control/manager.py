@@ -15,8 +15,14 @@ Modes:
 - ``position``: ``q_des = q_ref`` (the native servo; the paper's baseline).
 - ``torque``: ``q_des = q + dq_err`` on torque-controlled joints (eq. 10-12, :mod:`.law`), ``q_ref`` elsewhere.
   ``q`` is the encoder reading of the frame (not the filtered estimate): the servo sees exactly ``dq_err``.
-- ``hold``: entered by a safety trip; ``q_des`` = the measured angles at the trip. Only :meth:`reset` leaves
-  it (into position mode).
+- torque mode falls back to position control (bumpless) while the estimate is invalid after more skipped
+  frames than the estimator's ``max_gap`` (``gap_fallback = "position"``, counted in ``gap_fallbacks``; with
+  ``"trip"``: the ``estimate_gap`` trip), and returns to torque mode once it is valid again.
+- ``hold``: entered by a safety trip; ``q_des`` = the last valid measured angles at the trip, the torque terms
+  zero, the integrals frozen. Every held tick the checks still run on the frame, the estimate and the held
+  command, without latching: :attr:`ControlManager.condition` says whether the trip's cause is still there.
+  Only a reset leaves the hold (into position mode): :meth:`try_reset` refuses while a check still fails,
+  :meth:`reset` clears it unconditionally.
 
 Bumpless switch: on a mode change the offset ``last q_des - new command`` is added to the new command and
 faded to zero over ``fade_time`` with a half-cosine, so the first command of the new mode equals the last
@@ -68,6 +74,7 @@ class StateEstimate:
     base_angular_acceleration: np.ndarray | None = None  # [rad/s^2]
     base_specific_force: np.ndarray | None = None  # [m/s^2]
     valid: bool = True
+    gap_flush: int = 0  # ticks until the estimate is valid again after skipped frames (estimator's Estimate.gap_flush)
 
 
 class ControlManager:
@@ -88,6 +95,7 @@ class ControlManager:
         self._mode = Mode.POSITION
         self._requested = Mode.POSITION
         self._report: SafetyReport | None = None
+        self._condition: SafetyReport | None = None  # a check failing on the last held tick
         self._offset = np.zeros(n)  # [rad] bumpless-switch offset at the switch
         self._t_switch = -math.inf
         self._fading = False
@@ -95,6 +103,7 @@ class ControlManager:
         self._q_good = np.clip(np.zeros(n), info.q_min, info.q_max)  # last finite encoder reading
         self._q_hold = np.zeros(n)
         self._cmd = np.zeros(n)
+        self.gap_fallbacks = 0  # torque mode fell back to position control after skipped frames (gap_fallback)
 
     @classmethod
     def from_toml(cls, info: RobotInfo, path: str | Path = DEFAULT_PATH) -> ControlManager:
@@ -116,6 +125,18 @@ class ControlManager:
         """Why the controller is holding, or None."""
         return self._report
 
+    @property
+    def condition(self) -> SafetyReport | None:
+        """While holding: the check that still fails on the last tick (frame, estimate, held command), or None."""
+        return self._condition if self._report is not None else None
+
+    @property
+    def hold_posture(self) -> np.ndarray:
+        """[rad] (n,) the posture held since the trip (the last valid measured angles; read-only view)."""
+        v = self._q_hold.view()
+        v.flags.writeable = False
+        return v
+
     def request_mode(self, mode: Mode | str) -> None:
         """Switch to ``position`` or ``torque`` at the next tick (bumpless).
 
@@ -136,11 +157,25 @@ class ControlManager:
                                "non-empty torque_joints")
         self._requested = mode
 
+    def try_reset(self) -> str | None:
+        """Clear a latched trip if no check fails on the last held tick (:attr:`condition`): back to position mode.
+
+        Returns:
+            None if the trip was cleared (or there was none), else why not (the failing check's message).
+        """
+        if self._report is None:
+            return None
+        if self._condition is not None:
+            return f"the trip condition still holds: {self._condition.message}"
+        self.reset()
+        return None
+
     def reset(self) -> None:
         """Clear a latched trip: back to position mode, faded from the held angles."""
         if self._report is not None:
             log.warning("safety latch reset (was: %s)", self._report.message)
         self._report = None
+        self._condition = None
         self.terms.tripped = False
         self._requested = Mode.POSITION
         self.safety.reset()
@@ -165,19 +200,29 @@ class ControlManager:
         """
         t = self.terms
         t.time, t.seq = frame.time, frame.seq
-        if self._report is not None:
-            return self._hold(frame)
         has_estimate = estimate is not None and getattr(estimate, "valid", True)
+        if self._report is not None:
+            t = self._hold(frame)
+            self._condition = self._check_hold(frame, estimate if has_estimate else None, t.dq_err)
+            return t
         report = self.safety.check_frame(frame)
         if report is None and has_estimate:
             report = self.safety.check_estimate(frame, estimate.q, estimate.dq, estimate.ddq, estimate.tau)
-        if report is None and self._requested == Mode.TORQUE and not has_estimate:
-            report = SafetyReport("invalid_estimate", "", math.nan, 0.0, float(frame.time), int(frame.seq))
+        mode = self._requested
+        if report is None and mode == Mode.TORQUE and not has_estimate:
+            flush = int(getattr(estimate, "gap_flush", 0) or 0)
+            if flush and self.config.gap_fallback == "position":
+                mode = Mode.POSITION  # until the estimate is valid again (bumpless both ways)
+                if self._mode == Mode.TORQUE:
+                    self.gap_fallbacks += 1
+            elif flush:
+                report = SafetyReport("estimate_gap", "", flush, 0.0, float(frame.time), int(frame.seq))
+            else:
+                report = SafetyReport("invalid_estimate", "", math.nan, 0.0, float(frame.time), int(frame.seq))
         if report is not None:
             return self._trip(frame, report)
         q = frame.q
         np.copyto(self._q_good, q)  # finite: checked above
-        mode = self._requested
         switching = mode != self._mode
         if switching and mode == Mode.TORQUE:
             self.law.reset()
@@ -233,11 +278,22 @@ class ControlManager:
 
     def _trip(self, frame: SensorFrame, report: SafetyReport) -> ControlTerms:
         self._report = report
+        self._condition = report
         q = frame.q
         np.copyto(self._q_hold, self._q_good)  # last finite reading
-        np.copyto(self._q_hold, q, where=np.isfinite(q))
-        log.error("%s: holding the measured position", report.message)
+        if not (report.check == "sensor_status" and report.where == "encoders"):  # else no valid angle in it
+            np.copyto(self._q_hold, q, where=np.isfinite(q))
+        log.error("%s: holding the last valid measured posture", report.message)
         return self._hold(frame)
+
+    def _check_hold(self, frame: SensorFrame, estimate, dq_err: np.ndarray) -> SafetyReport | None:
+        """The checks of a running tick on a held one (frame, estimate, held command), latching nothing."""
+        report = self.safety.check_frame(frame)
+        if report is None and estimate is not None:
+            report = self.safety.check_estimate(frame, estimate.q, estimate.dq, estimate.ddq, estimate.tau)
+        if report is None:
+            report = self.safety.check_command(frame, dq_err)
+        return report
 
     def _hold(self, frame: SensorFrame) -> ControlTerms:
         t = self.terms

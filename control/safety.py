@@ -6,7 +6,9 @@ Checks (names in :data:`CHECKS`):
 - ``stale_frame``     the frame's robot time did not advance
 - ``invalid_frame``   NaN or inf in the encoders, the IMU or the F/T wrenches
 - ``joint_limit``     a measured angle is outside ``[q_min + margin, q_max - margin]``
-- ``invalid_estimate`` NaN or inf in the estimate (q, dq, ddq, tau)
+- ``invalid_estimate`` NaN or inf in the estimate (q, dq, ddq, tau), or no valid estimate in torque mode
+- ``estimate_gap``    torque mode after more skipped frames than the estimator's ``max_gap``: the estimate is
+                      finite but invalid for ``value`` more ticks (until a window of real readings)
 - ``joint_velocity``  ``|dq_hat| > max_velocity``
 - ``joint_torque``    ``|tau_hat| > max_torque``
 - ``command_error``   ``|q_des - q| > max_command_error`` (or a non-finite command)
@@ -32,6 +34,7 @@ CHECKS: tuple[str, ...] = (
     "invalid_frame",
     "joint_limit",
     "invalid_estimate",
+    "estimate_gap",
     "joint_velocity",
     "joint_torque",
     "command_error",
@@ -62,6 +65,8 @@ class SafetyReport:
             "stale_frame": f"time = {self.value:.6f} s, expected > previous {self.limit:.6f} s",
             "invalid_frame": "value is NaN or inf, expected finite",
             "invalid_estimate": "value is NaN or inf, expected finite",
+            "estimate_gap": f"frames were skipped for longer than max_gap: the estimate is invalid for "
+                            f"{self.value:g} more ticks",
             "joint_limit": f"q = {self.value:.4f}{unit} beyond the limit with margin {self.limit:.4f}{unit}",
         }.get(self.check, f"|value| = {abs(self.value):.4g}{unit} > limit {self.limit:.4g}{unit}")
         return f"safety trip [{self.check}]{where}: {what} at t = {self.time:.3f} s (seq {self.seq})"

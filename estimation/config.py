@@ -156,6 +156,10 @@ class EstimatorConfig:
     gyro_bias: np.ndarray = setting(unit="rad/s", shape=(3,), factory=lambda: np.zeros(3))  # IMU frame
     perturbation: ModelPerturbation = setting(ModelPerturbation())
     prediction: PredictionSettings = setting(PredictionSettings())
+    # [s] of robot time: skipped frames are filled by linear interpolation between the readings either side
+    # (the filters stay on the robot's time grid); a gap up to this long keeps the estimate valid, a longer
+    # one makes it invalid (finite, flagged by ``Estimate.gap_flush``) until a window of real readings follows
+    max_gap: float = setting(0.02, unit="s", min=0)
 
     def __post_init__(self):
         check_settings(self, EstimationError)

@@ -18,6 +18,14 @@ Missing, stale or non-finite readings (policy):
   that does not increase raises :class:`~servotau.errors.EstimationError`.
 - A bad reading never enters a filter: the filter is fed the sensor's last good reading (zeros
   before the first one), which keeps every filter on the common time grid.
+
+Skipped frames (a jump of ``frame.seq``: the controller was late and read a newer frame) are a *gap*,
+not bad readings: the filters are fed, for each missing tick of robot time, the linear interpolation
+between the last readings before the gap and those of the new frame, so values and derivatives across
+the gap stay finite and continuous. Every gap is counted (:attr:`TorqueEstimator.gaps`,
+``missing_frames``, ``longest_gap``) and reported on its frame (:attr:`Estimate.gap`). A gap up to
+``max_gap`` [s] keeps the estimate valid; a longer one leaves it finite but invalid
+(:attr:`Estimate.gap_flush` > 0) until a full window of real readings follows.
 - The sensor stays flagged until a full filter window (plus its alignment delay) of good readings
   has flushed the held values. Meanwhile every output that depends on it is NaN and flagged: the
   torque of joint i depends on the encoders of its subtree, its ancestors and the IMU's chain, on
@@ -28,6 +36,7 @@ Missing, stale or non-finite readings (policy):
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -41,6 +50,8 @@ from .delay_line import DelayLine
 from .dynamics import InverseDynamics
 from .model import EstimatorModel
 from .prediction import ModelPredictor
+
+logger = logging.getLogger(__name__)
 
 _ENC, _IMU = STATUS_NAMES.index("encoders"), STATUS_NAMES.index("imu")
 
@@ -71,12 +82,16 @@ class Estimate:
             (should stay near zero when nothing but the end effectors touches the robot).
         base_angular_velocity, base_angular_acceleration: [rad/s, rad/s^2] (3,) waist, waist frame.
         base_specific_force: [m/s^2] (3,) waist acceleration minus gravity, waist frame.
+        gap: Frames skipped just before this one (0: none), interpolated in robot time.
+        gap_flush: Ticks until the interpolated samples of a gap longer than ``max_gap`` have left the
+            filter windows (0: none; ``valid`` is False while > 0, the values stay finite).
     """
 
     _ARRAYS = ("q", "dq", "ddq", "tau", "tau_valid", "tau_predicted", "encoders_valid", "wrenches",
                "wrenches_valid", "base_wrench", "base_angular_velocity",
                "base_angular_acceleration", "base_specific_force")
-    _SCALARS = ("time", "seq", "delay", "valid", "imu_valid", "residual_force", "residual_torque")
+    _SCALARS = ("time", "seq", "delay", "valid", "imu_valid", "residual_force", "residual_torque", "gap",
+                "gap_flush")
     __slots__ = _ARRAYS + _SCALARS
 
     def __init__(self, n: int, n_ft: int):
@@ -99,6 +114,8 @@ class Estimate:
         self.imu_valid = False
         self.residual_force = nan
         self.residual_torque = nan
+        self.gap = 0
+        self.gap_flush = 0
 
     def copy(self) -> Estimate:
         """An independent copy (new arrays)."""
@@ -208,6 +225,12 @@ class TorqueEstimator:
         self._ft_count = np.full(nft, self._ft.flush, dtype=np.int64)
         self._pending = True
         self._last_seq = -1
+        self._gap_flush = 0  # ticks until a long gap's interpolated samples have left the windows
+        self._max_gap = int(math.floor(config.max_gap / dt + 1e-9))  # [frames]
+        self._before_gap = np.zeros(n_in)
+        self.gaps = 0  # gaps (jumps of frame.seq) so far
+        self.missing_frames = 0  # frames skipped in them
+        self.longest_gap = 0  # [frames]
         self._nan_tau = np.zeros(n, dtype=bool)
         self.estimate = Estimate(n, nft)
         self.estimate.delay = self.delay
@@ -240,8 +263,13 @@ class TorqueEstimator:
                 the model-based prediction (:attr:`Estimate.tau_predicted`).
         """
         seq = frame.seq
+        missing = 0
         if seq != self._last_seq + 1 and self._last_seq >= 0:
-            self._fill_gap(seq)
+            if seq <= self._last_seq:
+                raise EstimationError(f"frame seq {seq} after {self._last_seq}: expected increasing sequence "
+                                      "numbers")
+            missing = seq - self._last_seq - 1
+            np.copyto(self._before_gap, self._held)
         self._last_seq = seq
         raw, status = self._raw, frame.status
         try:
@@ -257,10 +285,13 @@ class TorqueEstimator:
             self._hold_good(status)
         else:
             np.copyto(self._held, raw)
+        out = self.estimate
+        out.gap = missing
+        if missing:
+            self._fill_gap(missing, frame)
         for f in self._filters:
             f.push()
         self.predictor.update(self._held_q, q_des)
-        out = self.estimate
         out.time = frame.time - self.delay
         out.seq = frame.seq
         if self._pending:
@@ -284,20 +315,34 @@ class TorqueEstimator:
         return out
 
     # -- input conditioning (only when a reading is bad or frames are missing) ------------------------
-    def _fill_gap(self, seq: int) -> None:
-        """Frames ``last + 1 .. seq - 1`` never arrived: keep the filters on the time grid by pushing the
-        held readings in their place, and flag everything until they have left the windows."""
-        if seq <= self._last_seq:
-            raise EstimationError(f"frame seq {seq} after {self._last_seq}: expected increasing sequence numbers")
+    def _fill_gap(self, missing: int, frame: SensorFrame) -> None:
+        """``missing`` frames before ``frame`` never arrived: push, for each missing tick, the linear
+        interpolation between the inputs before the gap and those of ``frame`` (already in ``_held``), so the
+        filters stay on the robot's time grid with finite, continuous values; count and report the gap."""
+        held, before = self._held, self._before_gap
+        after = held.copy()
+        step = (after - before) / (missing + 1)
         longest = max(f.flush for f in self._filters)
-        for _ in range(min(seq - self._last_seq - 1, longest)):
+        first = max(1, missing - longest + 1)  # the earlier samples would leave every window before this frame
+        for j in range(first, missing + 1):
+            np.multiply(step, j, out=held)
+            held += before
             for f in self._filters:
                 f.push()
             self.predictor.update(self._held_q, None)
-        self._enc_count[:] = self._enc.flush
-        self._imu_count = self._imu.flush
-        self._ft_count[:] = self._ft.flush
-        self._pending = True
+        np.copyto(held, after)
+        self.gaps += 1
+        self.missing_frames += missing
+        self.longest_gap = max(self.longest_gap, missing)
+        if missing > self._max_gap:
+            self._gap_flush = longest
+            self._pending = True
+            logger.warning("%d frames skipped before frame %d (t = %.3f s), more than max_gap = %.3f s: the estimate "
+                           "is invalid for the next %d ticks", missing, frame.seq, frame.time,
+                           self.config.max_gap, longest)
+        else:
+            logger.debug("%d frames skipped before frame %d (t = %.3f s): interpolated", missing, frame.seq,
+                         frame.time)
 
     def _hold_good(self, status: np.ndarray) -> None:
         """Copy the good readings of ``_raw`` into ``_held``, keep the last good ones elsewhere, flag."""
@@ -334,9 +379,11 @@ class TorqueEstimator:
         np.logical_not(tau_bad, out=out.tau_valid)
         w_bad = ft_bad | (self._ft_dep_enc & enc_bad).any(axis=1) | imu_bad
         np.logical_not(w_bad, out=out.wrenches_valid)
-        out.valid = not (tau_bad.any() or w_bad.any())
+        out.gap_flush = self._gap_flush
+        out.valid = not (tau_bad.any() or w_bad.any() or self._gap_flush)
         # Re-evaluate next tick while anything was flagged this tick (then once more to clear the flags).
-        self._pending = bool(enc_bad.any() or ft_bad.any() or imu_bad)
+        self._pending = bool(enc_bad.any() or ft_bad.any() or imu_bad or self._gap_flush)
+        self._gap_flush = max(self._gap_flush - 1, 0)
         self._enc_count -= 1
         np.maximum(self._enc_count, 0, out=self._enc_count)
         self._ft_count -= 1
@@ -344,6 +391,7 @@ class TorqueEstimator:
         self._imu_count = max(self._imu_count - 1, 0)
 
     def _mask_invalid(self, out: Estimate) -> None:
+        """NaN where a sensor is bad (a long gap alone leaves the interpolated values finite)."""
         np.logical_not(out.tau_valid, out=self._nan_tau)
         out.tau[self._nan_tau] = np.nan
         bad_enc = ~out.encoders_valid
@@ -352,8 +400,9 @@ class TorqueEstimator:
         out.ddq[bad_enc] = np.nan
         bad_ft = ~out.wrenches_valid
         out.wrenches[bad_ft] = np.nan
-        out.base_wrench[:] = np.nan  # the unknown wrench uses every input
-        out.residual_force = out.residual_torque = np.nan
+        if not (out.tau_valid.all() and out.wrenches_valid.all()):
+            out.base_wrench[:] = np.nan  # the unknown wrench uses every input
+            out.residual_force = out.residual_torque = np.nan
         if not out.imu_valid:
             out.base_angular_velocity[:] = np.nan
             out.base_angular_acceleration[:] = np.nan

@@ -15,6 +15,12 @@ Columns (float64 unless said otherwise)::
 :class:`LogWriter` writes every ``chunk_rows`` rows a complete Parquet chunk to ``<path>.parts/``,
 so a crash loses at most the last chunk; :meth:`LogWriter.close` merges the chunks into ``<path>``.
 :func:`read_log` also reads an unclosed log from its chunks.
+
+:meth:`LogWriter.append` never waits for the disk: full chunks go to a writer thread through a bounded
+queue of ``max_pending`` chunks; a chunk that finds the queue full (the disk or the writer thread is
+too slow) is dropped, counted in :attr:`LogWriter.dropped_rows` and reported when the log is closed.
+A control loop calling ``append`` every tick so never stalls on the log; the log then misses rows
+(their ``seq`` values are absent) instead.
 """
 
 from __future__ import annotations
@@ -112,6 +118,8 @@ class LogWriter:
         chunk_rows: rows per chunk; a crash loses at most the last chunk (and the one being written).
         metadata: extra key -> value strings stored in the schema metadata (scenario, seed...).
         background: write the chunks in a background thread (the control loop never waits for the disk).
+        max_pending: chunks waiting for the background writer at most; a chunk beyond is dropped and
+            counted (:attr:`dropped_rows`), never waited for.
     """
 
     def __init__(
@@ -124,23 +132,30 @@ class LogWriter:
         chunk_rows: int = 1000,
         metadata: Mapping[str, str] | None = None,
         background: bool = True,
+        max_pending: int = 8,
     ):
         self.path = Path(path)
         self.info = info
         self.chunk_rows = int(chunk_rows)
         if self.chunk_rows < 1:
             raise HalError(f"LogWriter chunk_rows = {chunk_rows}: expected >= 1")
+        if int(max_pending) < 1:
+            raise HalError(f"LogWriter max_pending = {max_pending}: expected >= 1")
+        _pa()  # import pyarrow now, not in the first append (a quarter of a second in the caller's loop)
         self._want_truth, self._want_extra = truth, extra
         self._metadata = {META_INFO: info_to_json(info), META_FORMAT: LOG_FORMAT_VERSION, **(metadata or {})}
         self.schema = None  # fixed by the constructor or the first append
         self._slots: dict[tuple[str, int], np.ndarray] = {}  # (extra name, size) -> column indices
         self._n = 0  # rows in the buffer
         self._chunks = 0
-        self.rows = 0  # rows recorded in total
+        self.rows = 0  # rows appended in total
+        self.dropped_rows = 0  # rows of the chunks dropped because the writer queue was full
+        self.dropped_chunks = 0
         self.closed = False
         _open_writers.add(self)
         self._error: BaseException | None = None  # of the background writer, raised by append/close
-        self._queue: queue.Queue | None = queue.Queue(maxsize=2) if background else None
+        self._queue: queue.Queue | None = queue.Queue(maxsize=int(max_pending)) if background else None
+        self._free: queue.SimpleQueue = queue.SimpleQueue()  # row buffers the writer thread is done with
         self._thread: threading.Thread | None = None
         parts = parts_dir(self.path)
         if parts.exists():
@@ -150,6 +165,12 @@ class LogWriter:
             self._setup(truth, list(extra))
 
     def _alloc(self) -> None:
+        """Fresh row buffers: one the writer thread has finished with, else new ones."""
+        try:
+            self._f, self._seq, self._status = self._free.get_nowait()
+            return
+        except queue.Empty:
+            pass
         self._f = np.empty((self.chunk_rows, len(self._float_cols)))
         self._seq = np.empty(self.chunk_rows, dtype=np.int64)
         self._status = np.empty((self.chunk_rows, len(STATUS_NAMES)), dtype=np.uint8)
@@ -275,24 +296,39 @@ class LogWriter:
                 self._write_chunk(job)
             except BaseException as exc:  # reported by the next append() or close()
                 self._error = exc
+            f, seq, status, _ = job
+            if len(f) == self.chunk_rows and f.base is None:  # a whole buffer: back to append()
+                self._free.put((f, seq, status))
 
     def flush(self) -> None:
-        """Hand the buffered rows over as one complete Parquet chunk (atomic rename)."""
+        """Hand the buffered rows over as one complete Parquet chunk (atomic rename); with a background writer
+        whose queue is full, drop them instead (counted in :attr:`dropped_rows`): never wait."""
         if self._n == 0 or self.schema is None:
             return
         n = self._n
-        job = (self._f[:n], self._seq[:n], self._status[:n], self._chunks)
-        self._chunks += 1
+        whole = n == self.chunk_rows
+        job = (self._f if whole else self._f[:n], self._seq if whole else self._seq[:n],
+               self._status if whole else self._status[:n], self._chunks)
         self._n = 0
         if self._queue is None:
+            self._chunks += 1
             self._write_chunk(job)
             return
-        self._alloc()  # the job owns the old buffers
         if self._thread is None:
             self._thread = threading.Thread(target=self._worker, name=f"LogWriter({self.path.name})",
                                             daemon=True)
             self._thread.start()
-        self._queue.put(job)
+        try:
+            self._queue.put_nowait(job)
+        except queue.Full:  # the writer is behind: keep the loop going, lose these rows (reused buffers)
+            self.dropped_rows += n
+            self.dropped_chunks += 1
+            if self.dropped_chunks == 1:
+                logger.warning("%s: the log writer is behind (%d chunks queued): dropping rows", self.path,
+                               self._queue.maxsize)
+            return
+        self._chunks += 1
+        self._alloc()  # the job owns the old buffers
 
     def close(self) -> None:
         """Flush, wait for the writer and merge the chunks into the final file; idempotent."""
@@ -304,9 +340,12 @@ class LogWriter:
             self._setup(bool(self._want_truth), list(self._want_extra or []))
         self.flush()
         if self._thread is not None:
-            self._queue.put(None)
+            self._queue.put(None)  # blocks while the queue is full: close() may wait, append() never does
             self._thread.join()
         finalize_log(self.path, self.schema)
+        if self.dropped_rows:
+            logger.warning("%s: %d of %d rows dropped in %d chunks (the log writer was behind; max_pending = %d)",
+                           self.path, self.dropped_rows, self.rows, self.dropped_chunks, self._queue.maxsize)
         if self._error is not None:
             raise HalError(f"{self.path}: writing a chunk failed, the log misses rows: {self._error}") \
                 from self._error

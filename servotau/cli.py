@@ -18,6 +18,7 @@ from servotau.errors import ServotauError
 COMMANDS = {
     "sim": "servotau.apps.sim",
     "control": "servotau.apps.control",
+    "ctl": "servotau.apps.ctl",
     "demo": "servotau.apps.demo",
     "identify": "servotau.apps.identify",
     "model": "servotau.apps.model",

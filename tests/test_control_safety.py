@@ -54,6 +54,9 @@ def _fault(check):
     est = _estimate()
     if check == "invalid_estimate":
         est.ddq[KNEE] = np.nan
+    elif check == "estimate_gap":  # the estimator after a gap longer than its max_gap: finite but invalid
+        est.valid, est.gap_flush = False, 80
+        return _frame(k), est, _ref(), ""
     elif check == "joint_velocity":
         est.dq[KNEE] = -6.0
     elif check == "joint_torque":
@@ -69,6 +72,8 @@ def _fault(check):
 def test_each_check_trips_and_latches_a_hold(check):
     """A fault trips the named check (joint, value vs limit); the hold keeps the measured angles until reset()."""
     mgr = ControlManager.from_toml(INFO)
+    if check == "estimate_gap":  # the default falls back to position control instead
+        mgr = ControlManager(INFO, dataclasses.replace(mgr.config, gap_fallback="trip"))
     mgr.request_mode("torque")
     for k in range(10):
         mgr.tick(_frame(k), _estimate(), _ref())

@@ -211,21 +211,35 @@ def test_bad_ft_or_imu_reading_is_flagged(standing, kind):
     np.testing.assert_array_equal(est[800].tau, clean[800].tau)
 
 
-def test_missing_frames_are_flagged_and_keep_the_time_grid(standing):
-    """Missing frames flag every output for a window and keep the filters on the time grid."""
+def test_skipped_frames_are_a_counted_gap_interpolated_in_robot_time(standing):
+    """Frames skipped while the arm moves: the estimate stays finite and on the time grid, the gap is counted and
+    reported on its frame; a gap up to max_gap (20 ms) keeps it valid and close to the estimate without the gap; a
+    longer one makes it invalid (still finite) for one window; a window after either gap, every torque is the
+    one without the gap; a sequence number that goes back is refused."""
     robot, frames, _, clean = standing
+    peak = np.abs(np.array([c.tau for c in clean[1500:]])).max(axis=0)
     est = TorqueEstimator(robot.info, oracle_config(robot))
     out = {}
-    for f in frames[:700] + frames[705:900]:
+    kept = frames[:1900] + frames[1904:2100] + frames[2160:2400]  # 4 frames skipped, then 60
+    for f in kept:
         out[f.seq] = est.update(f).copy()
-    assert out[frames[699].seq].valid
-    first = out[frames[705].seq]
-    assert not first.valid and np.isnan(first.tau).all() and first.time == pytest.approx(clean[705].time)
-    assert not out[frames[784].seq].valid
-    for k in (785, 899):
+    assert (est.gaps, est.missing_frames, est.longest_gap) == (2, 64, 60)
+    assert all(np.isfinite(e.tau).all() and np.isfinite(e.dq).all() and np.isfinite(e.ddq).all() for e in out.values()
+               if e.seq >= frames[100].seq)
+    short = out[frames[1904].seq]
+    assert short.gap == 4 and short.valid and short.gap_flush == 0
+    assert short.time == pytest.approx(clean[1904].time)
+    for k in range(1904, 1990):
+        assert out[frames[k].seq].valid
+        assert np.all(np.abs(out[frames[k].seq].tau - clean[k].tau) <= 0.02 * np.maximum(peak, 1.0))
+    long = out[frames[2160].seq]
+    assert long.gap == 60 and not long.valid and long.gap_flush == 80
+    assert np.isfinite(long.base_wrench).all() and np.isfinite(long.wrenches).all()
+    assert not out[frames[2239].seq].valid and out[frames[2240].seq].valid
+    for k in (1984, 2099, 2240, 2399):
         np.testing.assert_array_equal(out[frames[k].seq].tau, clean[k].tau)
     with pytest.raises(EstimationError, match="increasing"):
-        est.update(frames[899])
+        est.update(frames[2399])
 
 
 def test_shuffled_joint_order_gives_the_same_torques(standing):

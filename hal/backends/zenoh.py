@@ -314,6 +314,11 @@ class ZenohBackend(Backend):
                 return json.loads(r.ok.payload.to_bytes())
         raise HalTimeoutError(f'robot "{self.robot_name}" did not answer {self.keys.status} within {timeout} s')
 
+    def declare_queryable(self, key: str, handler) -> None:
+        """Answer queries on ``key`` with ``handler(query)`` (zenoh-python's callback thread) on this backend's
+        session until it closes: services of the controller process, e.g. the operator's reset and release."""
+        self._session.keep(self._session.z.declare_queryable(key, callback(handler)))
+
     def close(self) -> None:
         with self._cond:
             self._closed = True

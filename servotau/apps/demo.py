@@ -15,6 +15,8 @@ from pathlib import Path
 
 from servotau.apps.processes import free_port, stop_process, wait_ready
 
+HOLD_TIMEOUT = 2.0  # [s] robot time the controller holds after a safety trip before it releases (exit code 3)
+
 
 def register(sub) -> None:
     p = sub.add_parser("demo", help="sim robot process + controller process + Rerun recording",
@@ -40,7 +42,8 @@ def main(args) -> int:
         print("[demo] starting the controller process", flush=True)
         rrd, log = out / "demo.rrd", out / "log.parquet"
         ctl = subprocess.run([*cli, "control", "--port", str(port), "--mode", args.mode, "--duration",
-                              str(args.duration), "--rerun", f"save:{rrd}", "--log", str(log)])
+                              str(args.duration), "--rerun", f"save:{rrd}", "--log", str(log),
+                              "--hold-timeout", str(HOLD_TIMEOUT)])
     finally:
         stop_process(sim, timeout=20.0)
         ready.unlink(missing_ok=True)
