@@ -33,7 +33,9 @@ import zenoh
 from ..config import import_object
 from ..errors import MalformedMessage, ProtocolVersionMismatch
 from ..log import LogWriter
+from ..registry import hal_section
 from ..wire.protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
+from ..wire.security import Security, security_from_section
 from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 from .claim import ClaimTable, claim_key
 from .config import CLOCKS, MODES, ServerConfig
@@ -389,8 +391,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--lockstep-hold-after", type=float, help="[s] lock-step watchdog (default: --hold-after)")
     p.add_argument("--lockstep-servo-off-after", type=float, help="[s] lock-step (default: --servo-off-after)")
     p.add_argument("--ready-file", help="touched once the robot is served (for scripts and tests)")
+    p.add_argument("--security", metavar="HAL_TOML", help="secure the session with the tls, auth, access and "
+                   "insecure_network entries of [hal.server] in this file (docs/real_backend.md)")
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    security = security_from_section(hal_section(a.security).section("server", {}), robot_side=True) \
+        if a.security else Security()
     factory = import_object(a.robot)
     kwargs = json.loads(a.kwargs)
     robot = factory(a.scenario, **kwargs) if a.scenario else factory(**kwargs)
@@ -400,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
                                            lockstep_hold_after=a.lockstep_hold_after or a.hold_after,
                                            lockstep_servo_off_after=a.lockstep_servo_off_after or a.servo_off_after),
                        log=a.log, max_ticks=a.max_ticks,
-                       publish_truth=not a.no_truth, realtime_priority=a.realtime_priority)
+                       publish_truth=not a.no_truth, realtime_priority=a.realtime_priority, security=security)
     ready = (lambda: Path(a.ready_file).touch()) if a.ready_file else None
     server = serve(robot, cfg, ready)
     print(json.dumps(server.status()), flush=True)
