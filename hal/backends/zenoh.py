@@ -38,7 +38,7 @@ from ..wire.protocol import (
     info_from_json,
     keys,
 )
-from ..wire.security import SECURITY_KEYS, Security, check_endpoints, security_from_section
+from ..wire.security import SECURITY_KEYS, Security, check_endpoints, field_error, security_from_section
 from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 
 logger = logging.getLogger(__name__)
@@ -378,6 +378,6 @@ def from_config(hal: Section, *, port: int | None = None) -> ZenohBackend:
     try:
         check_endpoints(security, [*endpoints["connect"], *endpoints["listen"]], robot_side=False)
     except HalError as exc:
-        raise z.error("connect", list(endpoints["connect"]), str(exc)) from None
+        raise field_error(z, "connect", exc) from None
     cfg = load_dataclass(ZenohConfig, z, ignore=SECURITY_KEYS, security=security, **endpoints)
     return ZenohBackend(**{f.name: getattr(cfg, f.name) for f in fields(cfg)})

@@ -12,7 +12,7 @@ from ..config import endpoint_list, with_override
 from ..errors import HalError
 from ..registry import hal_section
 from ..wire.protocol import DEFAULT_ENDPOINT
-from ..wire.security import SECURITY_KEYS, Security, check_endpoints, security_from_section
+from ..wire.security import SECURITY_KEYS, Security, check_endpoints, field_error, security_from_section
 from .firmware import SafetyConfig
 from .realtime import check_priority
 
@@ -55,7 +55,7 @@ class ServerConfig:
         try:
             check_endpoints(security, listen + connect, robot_side=True)
         except HalError as exc:
-            raise s.error("listen" if listen else "connect", listen or connect, str(exc)) from None
+            raise field_error(s, "listen" if listen else "connect", exc) from None
         return load_dataclass(cls, s, ignore=SECURITY_KEYS, listen=tuple(listen), connect=tuple(connect),
                               safety=safety or SafetyConfig(), security=security)
 

@@ -30,12 +30,14 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
+from servotau.errors import ServotauError
+
 from ..config import import_object
 from ..errors import MalformedMessage, ProtocolVersionMismatch
 from ..log import LogWriter
 from ..registry import hal_section
 from ..wire.protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
-from ..wire.security import Security, security_from_section
+from ..wire.security import Security, check_endpoints, security_from_section
 from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 from .claim import ClaimTable, claim_key
 from .config import CLOCKS, MODES, ServerConfig
@@ -395,12 +397,17 @@ def main(argv: list[str] | None = None) -> int:
                    "insecure_network entries of [hal.server] in this file (docs/real_backend.md)")
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
-    security = security_from_section(hal_section(a.security).section("server", {}), robot_side=True) \
-        if a.security else Security()
+    listen = a.listen if a.listen is not None else ([] if a.connect else [DEFAULT_ENDPOINT])
+    try:  # before anything is built or served: a bad file or field is a one-line error
+        security = security_from_section(hal_section(a.security).section("server", {}), robot_side=True) \
+            if a.security else Security()
+        check_endpoints(security, [*listen, *a.connect], robot_side=True)
+    except ServotauError as exc:
+        print(f"python -m servotau.hal: error: {exc}", file=sys.stderr)
+        return 2
     factory = import_object(a.robot)
     kwargs = json.loads(a.kwargs)
     robot = factory(a.scenario, **kwargs) if a.scenario else factory(**kwargs)
-    listen = a.listen if a.listen is not None else ([] if a.connect else [DEFAULT_ENDPOINT])
     cfg = ServerConfig(robot=a.name, listen=tuple(listen), connect=tuple(a.connect), mode=a.mode, clock=a.clock,
                        safety=SafetyConfig(a.hold_after, a.servo_off_after,
                                            lockstep_hold_after=a.lockstep_hold_after or a.hold_after,

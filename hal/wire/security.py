@@ -17,10 +17,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from servotau.config import Section, check_settings, load_dataclass, setting
+from servotau.errors import ConfigError
 
 from ..errors import HalError
 
-__all__ = ["CAPABILITIES", "AccessRole", "AuthConfig", "Security", "TlsConfig", "check_endpoints",
+__all__ = ["CAPABILITIES", "AccessRole", "AuthConfig", "Security", "TlsConfig", "check_endpoints", "field_error",
            "is_loopback", "security_from_section"]
 
 TLS_PROTOCOLS = ("tls", "quic")  # Zenoh link protocols that run over TLS
@@ -239,6 +240,13 @@ def check_endpoints(sec: Security, endpoints: Iterable[str], *, robot_side: bool
 
 # -- config sections ---------------------------------------------------------------------------------
 
+def field_error(s: Section, key: str, exc: Exception) -> ConfigError:
+    """A ConfigError naming the file and the field ``key`` of ``s``, with the reason of ``exc``."""
+    name = f"{s.prefix}.{key}" if s.prefix else key
+    shown = f" = {s.data[key]!r}" if key in s and not isinstance(s.data[key], Mapping) else ""
+    return ConfigError(f"{s.file}: field '{name}'{shown}: {exc}")
+
+
 def _strings(s: Section, key: str) -> tuple[str, ...]:
     value = s.data.get(key, [])
     if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
@@ -299,7 +307,7 @@ def security_from_section(s: Section, *, robot_side: bool) -> Security:
     try:
         return Security(tls, auth, tuple(roles), insecure)
     except HalError as exc:
-        raise s.error("access", dict(s.data.get("access", {})), str(exc)) from None
+        raise field_error(s, "access", exc) from None
 
 
 def security_settings(sec: Security | None, *, key_prefix: str | None = None) -> Mapping[str, Any]:
