@@ -257,3 +257,34 @@ def test_loopback_default_needs_no_security():
 
     cfg = server_config("hal.toml")
     assert cfg.listen == ("tcp/127.0.0.1:7447",) and cfg.security == Security()
+
+
+def test_controller_side_config_errors_name_the_field(certs, tmp_path):
+    from servotau.hal.backends.zenoh import from_config
+
+    tls = {"root_ca_certificate": str(certs.ca), "certificate": str(certs.controller.certificate),
+           "private_key": str(certs.controller.private_key)}
+    cases = {
+        "field 'hal.zenoh.connect' = ['tls/127.0.0.1:1']: endpoint 'tls/127.0.0.1:1' needs tls settings":
+            {"connect": ["tls/127.0.0.1:1"]},
+        "field 'hal.zenoh.connect' = ['tcp/192.168.1.10:7447']: endpoint 'tcp/192.168.1.10:7447' leaves this machine "
+        "without TLS": {"connect": ["tcp/192.168.1.10:7447"]},
+        "field 'hal.zenoh.auth.password_file' = '/nonexistent/pw': expected a readable file (file not found)":
+            {"connect": ["tls/127.0.0.1:1"], "tls": tls, "auth": {"user": "c", "password_file": "/nonexistent/pw"}},
+        "field 'hal.zenoh.access'": {"connect": ["tls/127.0.0.1:1"], "tls": tls, "access": {}},
+    }
+    for expected, data in cases.items():
+        with pytest.raises(ConfigError) as exc:
+            from_config(Section({"zenoh": data}, "hal.toml", "hal"))
+        assert expected in str(exc.value), (expected, str(exc.value))
+
+
+def test_the_robot_process_refuses_a_network_endpoint_without_security(certs, capsys):
+    """``python -m servotau.hal`` checks its endpoints before it builds or serves the robot."""
+    from servotau.hal.robot.server import main
+
+    assert main(["--robot", "servotau.simrobot.fake:FakeRobot", "--listen", "tcp/0.0.0.0:7447"]) == 2
+    assert "endpoint 'tcp/0.0.0.0:7447' leaves this machine without TLS" in capsys.readouterr().err
+    with pytest.raises(HalError, match="without access control"):  # the session config itself checks it too
+        zenoh_config(listen=["tls/0.0.0.0:7447"], security=Security(tls=_tls(certs.robot, certs)),
+                     key_prefix="servotau/v1/x")
