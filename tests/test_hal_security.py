@@ -288,3 +288,27 @@ def test_the_robot_process_refuses_a_network_endpoint_without_security(certs, ca
     with pytest.raises(HalError, match="without access control"):  # the session config itself checks it too
         zenoh_config(listen=["tls/0.0.0.0:7447"], security=Security(tls=_tls(certs.robot, certs)),
                      key_prefix="servotau/v1/x")
+
+
+def test_access_by_network_interface_and_a_role_that_may_only_observe():
+    """Roles by interface on plain loopback: the controller role drives; an observe-only role is not answered."""
+    for may, drives in ((("command", "claim", "observe"), True), (("observe",), False)):
+        port = free_port()
+        ep = f"tcp/127.0.0.1:{port}"
+        roles = (AccessRole("local", may, interfaces=("lo",)), AccessRole("nobody", ("command",), interfaces=("x9",)))
+        with serving(ServerConfig(listen=(ep,), security=Security(access=roles))):
+            if drives:
+                with ZenohBackend("fake", connect=[ep], frame_timeout=TIMEOUT) as b:
+                    f = b.read()
+                    b.write({"J00": f.q[0]})
+                    assert b.read().seq == f.seq + 1
+            else:
+                with pytest.raises(HalError, match="did not answer the claim.*access control"):
+                    ZenohBackend("fake", connect=[ep], connect_timeout=1.0)
+
+
+def test_tls_settings_built_in_python_are_checked_too(certs):
+    with pytest.raises(HalError, match="TlsConfig.private_key: file not found: /nonexistent/key.pem"):
+        TlsConfig(str(certs.ca), str(certs.robot.certificate), "/nonexistent/key.pem")
+    with pytest.raises(HalError, match=r"may = \['drive'\]: expected a non-empty list among"):
+        AccessRole("x", ("drive",), cert_common_names=("a",))

@@ -310,10 +310,5 @@ def security_from_section(s: Section, *, robot_side: bool) -> Security:
         raise field_error(s, "access", exc) from None
 
 
-def security_settings(sec: Security | None, *, key_prefix: str | None = None) -> Mapping[str, Any]:
-    """:meth:`Security.zenoh_settings` of ``sec`` (none for None)."""
-    return {} if sec is None else sec.zenoh_settings(key_prefix)
-
-
 SECURITY_KEYS = ("tls", "auth", "access", "insecure_network")
 """The entries of ``[hal.server]`` / ``[hal.zenoh]`` that :func:`security_from_section` reads."""
