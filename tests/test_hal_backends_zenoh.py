@@ -78,7 +78,7 @@ class _FramePeer:
         s.keep(s.z.declare_queryable(k.info, lambda q: q.reply(k.info, info_to_json(self.robot.info))))
         claims = ClaimTable()
         s.keep(s.z.declare_queryable(claim_key(k.prefix), lambda q: q.reply(
-            claim_key(k.prefix), claims.handle(q.payload.to_bytes(), {}, time.monotonic())[0])))
+            claim_key(k.prefix), claims.handle(q.payload.to_bytes(), {}, None, time.monotonic())[0])))
         self.pub = s.keep(s.z.declare_publisher(k.frame))
         s.keep(s.z.liveliness().declare_token(k.alive_robot))
         self.stop = threading.Event()

@@ -312,3 +312,28 @@ def test_tls_settings_built_in_python_are_checked_too(certs):
         TlsConfig(str(certs.ca), str(certs.robot.certificate), "/nonexistent/key.pem")
     with pytest.raises(HalError, match=r"may = \['drive'\]: expected a non-empty list among"):
         AccessRole("x", ("drive",), cert_common_names=("a",))
+
+
+def test_a_claim_needs_a_session_the_robot_can_watch():
+    """A claim naming a session the robot cannot watch (no transport, no token) is refused, so no claim outlives
+    the session behind it; a peer's own zid is granted, and the claim ends when that session closes."""
+    from servotau.hal.robot.claim import claim_key, claim_request
+
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    with serving(ServerConfig(listen=(ep,))) as server:
+        peer = Session(zenoh_config(connect=[ep]))
+        try:
+            def claim(zid: str) -> dict:
+                r = next(iter(peer.z.get(claim_key(keys("fake").prefix), payload=claim_request(zid, "h", 1, "u"),
+                                         timeout=2.0)))
+                return json.loads(r.ok.payload.to_bytes())
+
+            forged = claim("abcdef")
+            assert not forged["granted"] and "neither a transport to the robot nor" in forged["error"]
+            assert claim(str(peer.z.zid()))["granted"]
+            assert server.status()["claim_holder"] is not None
+        finally:
+            peer.close()
+        _wait(lambda: server.status()["claim_holder"] is None)
+        assert server.status()["claim_holder"] is None and server.status()["claims_refused"] == 1

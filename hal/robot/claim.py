@@ -17,7 +17,7 @@ import hmac
 import json
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import asdict, dataclass
 
 from ..errors import ClaimRefused, MalformedMessage
@@ -93,6 +93,8 @@ def claim_reply(buf: bytes, robot: str) -> bytes:
         r = json.loads(buf)
         if r.get("granted"):
             return bytes.fromhex(r["token"])
+        if "error" in r:
+            raise ClaimRefused(f'robot "{robot}" refused the claim: {r["error"]}')
         holder, since = Claimant(**r["holder"]), float(r["since_s"])
     except (ValueError, TypeError, KeyError, AttributeError) as exc:
         raise MalformedMessage(f'robot "{robot}" answered the claim with {buf[:200]!r}: {exc}') from None
@@ -112,9 +114,13 @@ class ClaimTable:
         self.claims_refused = 0
         self.commands_not_claimer = 0  # commands without the holder's token (or with no claim held)
 
-    def handle(self, buf: bytes, links: Mapping[str, str | None], now: float) -> tuple[bytes, str | None]:
+    def handle(self, buf: bytes, links: Mapping[str, str | None], tokens: Collection[str] | None,
+               now: float) -> tuple[bytes, str | None]:
         """Answer a claim or release request. ``links``: the robot's open transports, zid -> authenticated
-        identity (None if none). Returns the reply and ``"granted"``, ``"released"`` or None (nothing changed)."""
+        identity (None if none); ``tokens``: the zids whose ``alive/controller/<zid>`` token is alive (None: do
+        not check). A claim is granted only to a session the robot can watch (a transport or a token), so
+        that every claim ends with the session behind it. Returns the reply and ``"granted"``, ``"released"``
+        or None (nothing changed)."""
         try:
             req = _request(buf)
         except MalformedMessage as exc:
@@ -130,6 +136,10 @@ class ClaimTable:
             self.claims_refused += 1
             return json.dumps({"granted": False, "holder": asdict(self.holder),
                                "since_s": now - self.since}).encode(), None
+        if self.holder is None and tokens is not None and zid not in links and zid not in tokens:
+            self.claims_refused += 1
+            return json.dumps({"granted": False, "error": f"session {zid} has neither a transport to the robot nor "
+                               "its alive/controller/<zid> token: declare the token, then claim"}).encode(), None
         if self.holder is None:
             self.holder = Claimant(zid, req.get("host", "?"), req.get("pid", 0), req.get("user", "?"), links.get(zid))
             self.token, self.since, self.direct = os.urandom(TOKEN_BYTES), now, zid in links

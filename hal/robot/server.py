@@ -82,6 +82,7 @@ class RobotServer:
         self._last_accepted = -1  # real-time: seq answered by the newest accepted command
         self._controller_lost = False
         self.claims = ClaimTable()  # who controls the robot (hal/robot/claim.py), guarded by _cond
+        self._tokens: set[str] = set()  # zids whose alive/controller/<zid> token is alive, guarded by _cond
         self._rtt = np.zeros(_RTT_WINDOW)
         self._n_rtt = 0
         self.ticks = 0
@@ -131,9 +132,15 @@ class RobotServer:
                 self.firmware.stale()
 
     def _on_controller_liveliness(self, sample: zenoh.Sample) -> None:
-        """A claiming session's own token ``.../alive/controller/<zid>`` vanished (through a router)."""
+        """A claiming session's own token ``.../alive/controller/<zid>`` came or vanished (through a router)."""
+        zid = str(sample.key_expr).rsplit("/", 1)[-1]
         if sample.kind == zenoh.SampleKind.DELETE:
-            self._session_gone(str(sample.key_expr).rsplit("/", 1)[-1], "its liveliness token vanished")
+            with self._cond:
+                self._tokens.discard(zid)
+            self._session_gone(zid, "its liveliness token vanished")
+        else:
+            with self._cond:
+                self._tokens.add(zid)
 
     def _on_transport(self, event: zenoh.TransportEvent) -> None:
         """A peer's transport to the robot closed: if it held the claim, the controller is gone."""
@@ -160,12 +167,13 @@ class RobotServer:
             pass
         payload = query.payload.to_bytes() if query.payload is not None else b""
         with self._cond:
-            reply, event = self.claims.handle(payload, links, time.monotonic())
+            reply, event = self.claims.handle(payload, links, self._tokens, time.monotonic())
             if event == "released":
                 self._controller_lost = True
                 self._cond.notify_all()
             if event is not None:
-                logger.info("%s: claim %s (%s)", self.info.name, event, self.claims.holder or "released")
+                holder = self.claims.holder
+                logger.info("%s: claim %s%s", self.info.name, event, f" to {holder.describe()}" if holder else "")
         query.reply(str(query.key_expr), reply)
 
     def _on_truth_matching(self, status: zenoh.MatchingStatus) -> None:
@@ -252,7 +260,8 @@ class RobotServer:
         s.keep(z.declare_subscriber(k.command, callback(self._on_command, direct=True)))
         # the claimer's death, seen from its own session: its transport, or (router) its zid-scoped token
         s.keep(z.info.declare_transport_events_listener(callback(self._on_transport)))
-        s.keep(z.liveliness().declare_subscriber(f"{k.alive_controller}/*", callback(self._on_controller_liveliness)))
+        s.keep(z.liveliness().declare_subscriber(f"{k.alive_controller}/*", callback(self._on_controller_liveliness),
+                                                 history=True))
         s.keep(z.declare_queryable(claim_key(k.prefix), callback(self._on_claim)))
         s.keep(z.declare_queryable(k.info, callback(self._on_query)))
         s.keep(z.declare_queryable(k.status, callback(self._on_query)))
