@@ -136,8 +136,9 @@ class AuthConfig:
 
 @dataclass(frozen=True)
 class AccessRole:
-    """One role of ``[...access]``: who (Zenoh subjects: any of the certificate common names, user names,
-    network interfaces) may do what (:data:`CAPABILITIES`)."""
+    """One role of ``[...access]``: who (a Zenoh subject) may do what (:data:`CAPABILITIES`). A peer matches
+    when it matches every kind of name the role gives, one name of each kind (Zenoh's subjects: e.g. the
+    controller's certificate common name *and* the interface ``eth1``)."""
 
     name: str
     may: tuple[str, ...]
