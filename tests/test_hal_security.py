@@ -337,3 +337,15 @@ def test_a_claim_needs_a_session_the_robot_can_watch():
             peer.close()
         _wait(lambda: server.status()["claim_holder"] is None)
         assert server.status()["claim_holder"] is None and server.status()["claims_refused"] == 1
+
+
+def test_a_role_needs_every_kind_of_name_it_gives(certs):
+    """The controller's certificate on the wrong interface matches no role: no session reaches the robot."""
+    port = free_port()
+    ep = f"tls/127.0.0.1:{port}"
+    roles = (AccessRole("controller", ("command", "claim", "observe"), cert_common_names=(CONTROLLER_CN,),
+                        interfaces=("x9",)),)
+    with serving(ServerConfig(listen=(ep,), security=Security(tls=_tls(certs.robot, certs), access=roles))):
+        with pytest.raises(HalError, match="no robot"):
+            ZenohBackend("fake", connect=[ep], connect_timeout=0.5,
+                         security=Security(tls=_tls(certs.controller, certs)))
