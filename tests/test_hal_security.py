@@ -349,3 +349,13 @@ def test_a_role_needs_every_kind_of_name_it_gives(certs):
         with pytest.raises(HalError, match="no robot"):
             ZenohBackend("fake", connect=[ep], connect_timeout=0.5,
                          security=Security(tls=_tls(certs.controller, certs)))
+
+
+@pytest.mark.parametrize("endpoint, loopback", [
+    ("tcp/127.0.0.1:7447", True), ("tls/localhost:7447", True), ("tcp/[::1]:7447", True),
+    ("unixsock-stream//tmp/zenoh.sock", True), ("tcp/0.0.0.0:7447", False), ("tcp/[::]:7447", False),
+    ("tls/robot.lan:7447", False), ("tcp/localhost.example.com:7447", False), ("udp/192.168.1.10:7447", False)])
+def test_loopback_endpoints(endpoint, loopback):
+    from servotau.hal.wire.security import is_loopback
+
+    assert is_loopback(endpoint) is loopback
