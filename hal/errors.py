@@ -21,8 +21,17 @@ class RobotLost(HalError, ConnectionError):
     """The robot process disappeared (its liveliness token vanished): the controller must stop."""
 
 
+class ClaimRefused(HalError, PermissionError):
+    """The robot is claimed by another controller (one at a time): the message names the holder."""
+
+
+class RobotServoOff(HalError):
+    """The robot's servos are off (latched) at connect: an operator must reset it first."""
+
+
 class EndOfLog(HalError, EOFError):
     """A replayed log has no more frames."""
 
 
-__all__ = ["EndOfLog", "HalError", "HalTimeoutError", "MalformedMessage", "ProtocolVersionMismatch", "RobotLost"]
+__all__ = ["ClaimRefused", "EndOfLog", "HalError", "HalTimeoutError", "MalformedMessage", "ProtocolVersionMismatch",
+           "RobotLost", "RobotServoOff"]

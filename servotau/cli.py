@@ -22,6 +22,7 @@ COMMANDS = {
     "demo": "servotau.apps.demo",
     "identify": "servotau.apps.identify",
     "model": "servotau.apps.model",
+    "certs": "servotau.apps.certs",
     "experiment": "servotau.experiments",
 }
 

@@ -11,6 +11,7 @@ from support.hal import endpoint, free_port, robot_server
 
 from servotau.errors import HalError, HalTimeoutError
 from servotau.hal import MalformedMessage, ZenohBackend, keys
+from servotau.hal.robot.claim import ClaimTable, claim_key
 from servotau.hal.wire.protocol import HEADER_SIZE, encode_frame, info_to_json
 from servotau.hal.wire.session import Session, zenoh_config
 from servotau.simrobot.fake import FakeRobot
@@ -67,13 +68,17 @@ def test_realtime_read_returns_the_newest_frame_and_counts_the_skipped(tmp_path)
 
 
 class _FramePeer:
-    """A minimal robot peer inside the test: liveliness token, info queryable, frames published on demand."""
+    """A minimal robot peer inside the test: liveliness token, info and claim queryables, frames published on
+    demand."""
 
     def __init__(self, port: int):
         self.robot = FakeRobot(name="peer")
         k = keys("peer")
         self.session = s = Session(zenoh_config(listen=[endpoint(port)]))
         s.keep(s.z.declare_queryable(k.info, lambda q: q.reply(k.info, info_to_json(self.robot.info))))
+        claims = ClaimTable()
+        s.keep(s.z.declare_queryable(claim_key(k.prefix), lambda q: q.reply(
+            claim_key(k.prefix), claims.handle(q.payload.to_bytes(), {}, None, time.monotonic())[0])))
         self.pub = s.keep(s.z.declare_publisher(k.frame))
         s.keep(s.z.liveliness().declare_token(k.alive_robot))
         self.stop = threading.Event()

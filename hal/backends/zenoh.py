@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import getpass
 import json
 import logging
 import math
+import os
+import socket
 import struct
 import threading
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -19,7 +22,8 @@ from servotau.config import Section, check_settings, load_dataclass, setting
 
 from ..backend import Backend
 from ..config import endpoint_list, with_override
-from ..errors import HalError, HalTimeoutError, MalformedMessage, RobotLost
+from ..errors import HalError, HalTimeoutError, MalformedMessage, RobotLost, RobotServoOff
+from ..robot.claim import claim_key, claim_reply, claim_request, release_request, token_key
 from ..robot.realtime import set_realtime_priority
 from ..types import GroundTruth, SensorFrame
 from ..wire.protocol import (
@@ -34,6 +38,7 @@ from ..wire.protocol import (
     info_from_json,
     keys,
 )
+from ..wire.security import SECURITY_KEYS, Security, check_endpoints, field_error, security_from_section
 from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
 
 logger = logging.getLogger(__name__)
@@ -55,6 +60,7 @@ class ZenohConfig:
     frame_timeout: float = setting(0.1, unit="s", min=0, strict_min=True)  # no frame for this long: HalTimeoutError
     truth: bool = setting(True)  # receive the simulator's ground truth (evaluation)
     realtime_priority: int = setting(0, min=0, max=99)  # SCHED_FIFO priority of the loop and zenoh's threads
+    security: Security = field(default_factory=Security)  # TLS and authentication (hal/wire/security.py)
 
     def __post_init__(self):
         check_settings(self, HalError)
@@ -66,6 +72,10 @@ class ZenohBackend(Backend):
     A dead robot is detected by its liveliness token vanishing (a few ms for a killed process on
     loopback): :meth:`read` then raises :class:`RobotLost`; no frame within ``frame_timeout``
     raises :class:`HalTimeoutError`.
+
+    At connect the backend claims the robot (one controller at a time, hal/robot/claim.py): a robot
+    claimed by another controller raises :class:`~servotau.hal.errors.ClaimRefused`, a robot whose
+    servos are off (latched) :class:`~servotau.hal.errors.RobotServoOff`; :meth:`close` releases it.
 
     Frames reach the control thread without a Python thread in between: zenoh's network thread
     queues them in a ring channel and :meth:`read` takes them out (one GIL hand-over per frame
@@ -85,6 +95,8 @@ class ZenohBackend(Backend):
             encoding, sending and decoding it every tick).
         realtime_priority: SCHED_FIFO priority 1..99 of the calling thread (the control loop) and of
             zenoh's threads (:mod:`servotau.hal.robot.realtime`); 0: ordinary scheduling.
+        security: Zenoh TLS and authentication of this side (:class:`~servotau.hal.wire.security.Security`);
+            None: plain TCP, loopback only.
     """
 
     def __init__(
@@ -99,6 +111,7 @@ class ZenohBackend(Backend):
         zenoh_extra: Mapping[str, Any] | None = None,
         truth: bool = ZenohConfig.truth,
         realtime_priority: int = ZenohConfig.realtime_priority,
+        security: Security | None = None,
     ):
         self.keys = keys(robot)
         self.robot_name = robot
@@ -116,11 +129,14 @@ class ZenohBackend(Backend):
         self.frames_skipped = 0  # frames never returned by read() (a newer one came first)
         self._joint_names: tuple[str, ...] | None = None
         self._closed, self._last_read = False, None  # (Backend.__init__ runs once connected)
+        self._token: bytes | None = None  # the claim's token, the attachment of every command
         set_realtime_priority(realtime_priority)  # before the session: zenoh's threads inherit it
-        self._session = Session(zenoh_config(listen=listen, connect=connect, mode=mode, extra=zenoh_extra))
+        self._session = Session(zenoh_config(listen=listen, connect=connect, mode=mode, extra=zenoh_extra,
+                                             security=security))
         try:
             first = self._connect(connect_timeout)
         except BaseException:
+            self._release()
             self._session.close()
             raise
         super().__init__(self.info, first)
@@ -137,19 +153,46 @@ class ZenohBackend(Backend):
                                       f"same robot name and protocol v{PROTOCOL_VERSION}?")
         self.info = self._query_info(max(deadline - time.monotonic(), 0.5))
         self._joint_names = self.info.joint_names
+        # the claiming session's own token first: the robot sees this session go even through a router
+        s.keep(z.liveliness().declare_token(token_key(k.alive_controller, str(z.zid()))))
+        self._token = self._claim(max(deadline - time.monotonic(), 0.5))
         self._frames = s.keep(z.declare_subscriber(k.frame, zenoh.handlers.RingChannel(_FRAMES_KEPT)))
         if self._want_truth:
             s.keep(z.declare_subscriber(k.truth, callback(self._on_truth)))
         self._pub = s.keep(z.declare_publisher(k.command, express=True,
                                                congestion_control=zenoh.CongestionControl.BLOCK,
                                                priority=zenoh.Priority.REAL_TIME))
-        s.keep(z.liveliness().declare_token(k.alive_controller))
         threading.Thread(target=self._run_alarm, name=f"hal-{self.robot_name}-read-alarm", daemon=True).start()
         frame = self._receive(max(deadline - time.monotonic(), 0.0))
         if frame is None:
             raise HalTimeoutError(f'robot "{self.robot_name}" is alive on {self._where} but sent no frame '
                                   f"within {timeout} s")
+        if self._flags & FLAG_SERVO_OFF:
+            raise RobotServoOff(f'robot "{self.robot_name}": robot servos are off (latched): reset it with '
+                                "`servotau ctl reset`, then connect again")
         return frame
+
+    def _claim(self, timeout: float) -> bytes:
+        """Claim the robot (hal/robot/claim.py): its token, or ClaimRefused naming the holder."""
+        z = self._session.z
+        request = claim_request(str(z.zid()), socket.gethostname(), os.getpid(), getpass.getuser())
+        for r in z.get(claim_key(self.keys.prefix), payload=request, timeout=timeout):
+            if r.ok is not None:
+                return claim_reply(r.ok.payload.to_bytes(), self.robot_name)
+        raise HalTimeoutError(f'robot "{self.robot_name}" did not answer the claim on {claim_key(self.keys.prefix)} '
+                              f"within {timeout} s: an older robot process, or its access control does not let "
+                              "this identity claim it (see [hal.server.access])")
+
+    def _release(self) -> None:
+        """Release the claim (the robot holds at once); nothing if none is held or the robot is gone."""
+        token, self._token = self._token, None
+        if token is None or self._session.closed:
+            return
+        try:
+            for _ in self._session.z.get(claim_key(self.keys.prefix), payload=release_request(token), timeout=0.5):
+                pass
+        except Exception:  # the robot or the session is gone: the claim ends with this session anyway
+            pass
 
     def _query_info(self, timeout: float):
         replies = list(self._session.z.get(self.keys.info, timeout=timeout))
@@ -272,7 +315,7 @@ class ZenohBackend(Backend):
         if self._error is not None:
             raise self._error
         self._min_seq = max(self._min_seq, answers.seq)
-        self._pub.put(encode_command(answers.seq, answers.time, q_des))
+        self._pub.put(encode_command(answers.seq, answers.time, q_des), attachment=self._token)
 
     def ground_truth(self, wait: float = 0.005) -> GroundTruth | None:
         """Ground truth of the tick of the last frame read (waits up to ``wait`` [s] for it to arrive;
@@ -324,6 +367,7 @@ class ZenohBackend(Backend):
             self._closed = True
             self._cond.notify_all()
         self._wake()
+        self._release()
         self._session.close()
 
 
@@ -331,8 +375,14 @@ def from_config(hal: Section, *, port: int | None = None) -> ZenohBackend:
     """Open a :class:`ZenohBackend` from ``[hal.zenoh]`` (``port``: connect to ``tcp/127.0.0.1:<port>``
     instead of the configured endpoints); every error names the file and the field."""
     z = hal.section("zenoh", {})
-    z.check_keys(ZenohConfig.__dataclass_fields__)
+    z.check_keys([f for f in ZenohConfig.__dataclass_fields__ if f != "security"] + list(SECURITY_KEYS))
     if port is not None:
         z = with_override(z, "connect", [f"tcp/127.0.0.1:{port}"], "--port")
     endpoints = {key: tuple(endpoint_list(z, key, list(getattr(ZenohConfig, key)))) for key in ("connect", "listen")}
-    return ZenohBackend(**asdict(load_dataclass(ZenohConfig, z, **endpoints)))
+    security = security_from_section(z, robot_side=False)
+    try:
+        check_endpoints(security, [*endpoints["connect"], *endpoints["listen"]], robot_side=False)
+    except HalError as exc:
+        raise field_error(z, "connect", exc) from None
+    cfg = load_dataclass(ZenohConfig, z, ignore=SECURITY_KEYS, security=security, **endpoints)
+    return ZenohBackend(**{f.name: getattr(cfg, f.name) for f in fields(cfg)})

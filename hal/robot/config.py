@@ -12,6 +12,7 @@ from ..config import endpoint_list, with_override
 from ..errors import HalError
 from ..registry import hal_section
 from ..wire.protocol import DEFAULT_ENDPOINT
+from ..wire.security import SECURITY_KEYS, Security, check_endpoints, field_error, security_from_section
 from .firmware import SafetyConfig
 from .realtime import check_priority
 
@@ -37,6 +38,7 @@ class ServerConfig:
     publish_truth: bool = setting(True)
     realtime_priority: int = setting(0, min=0, max=99)  # SCHED_FIFO priority of the process (hal/robot/realtime.py);
     # 0: ordinary scheduling
+    security: Security = field(default_factory=Security)  # TLS, authentication, access control (hal/wire/security.py)
 
     def __post_init__(self):
         check_settings(self, HalError)
@@ -46,10 +48,16 @@ class ServerConfig:
     def from_section(cls, s: Section, safety: SafetyConfig | None = None) -> ServerConfig:
         """Read robot, listen, connect, mode, clock, republish_interval, log, max_ticks, publish_truth;
         every error names the file and the field (see :func:`server_config`)."""
-        s.check_keys([f for f in cls.__dataclass_fields__ if f != "safety"])
+        s.check_keys([f for f in cls.__dataclass_fields__ if f not in ("safety", "security")] + list(SECURITY_KEYS))
         connect = endpoint_list(s, "connect", list(cls.connect))
         listen = endpoint_list(s, "listen", [] if connect else list(cls.listen))
-        return load_dataclass(cls, s, listen=tuple(listen), connect=tuple(connect), safety=safety or SafetyConfig())
+        security = security_from_section(s, robot_side=True)
+        try:
+            check_endpoints(security, listen + connect, robot_side=True)
+        except HalError as exc:
+            raise field_error(s, "listen" if listen else "connect", exc) from None
+        return load_dataclass(cls, s, ignore=SECURITY_KEYS, listen=tuple(listen), connect=tuple(connect),
+                              safety=safety or SafetyConfig(), security=security)
 
 
 def safety_config(config: Section | str | Path) -> SafetyConfig:

@@ -30,11 +30,16 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
+from servotau.errors import ServotauError
+
 from ..config import import_object
 from ..errors import MalformedMessage, ProtocolVersionMismatch
 from ..log import LogWriter
+from ..registry import hal_section
 from ..wire.protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
+from ..wire.security import Security, check_endpoints, security_from_section
 from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
+from .claim import ClaimTable, claim_key
 from .config import CLOCKS, MODES, ServerConfig
 from .firmware import LOG_EXTRA, Firmware, FirmwareState, SafetyConfig
 from .realtime import set_realtime_priority, set_timer_slack
@@ -75,8 +80,9 @@ class RobotServer:
         self._published = -1  # seq of the last published frame
         self._t_published = math.nan  # when it was (last) published, time.monotonic() [s]
         self._last_accepted = -1  # real-time: seq answered by the newest accepted command
-        self._controller_alive = False
         self._controller_lost = False
+        self.claims = ClaimTable()  # who controls the robot (hal/robot/claim.py), guarded by _cond
+        self._tokens: set[str] = set()  # zids whose alive/controller/<zid> token is alive, guarded by _cond
         self._rtt = np.zeros(_RTT_WINDOW)
         self._n_rtt = 0
         self.ticks = 0
@@ -106,6 +112,8 @@ class RobotServer:
                 self._n_rtt += 1
             if not self._serving:
                 return
+            if not self.claims.allows(sample.attachment.to_bytes() if sample.attachment is not None else None):
+                return  # not from the controller holding the claim: rejected, counted
             if not self.lockstep:
                 if seq >= self._last_accepted:  # real time: the newest command wins
                     self._pending = (q_des, t)
@@ -124,14 +132,49 @@ class RobotServer:
                 self.firmware.stale()
 
     def _on_controller_liveliness(self, sample: zenoh.Sample) -> None:
+        """A claiming session's own token ``.../alive/controller/<zid>`` came or vanished (through a router)."""
+        zid = str(sample.key_expr).rsplit("/", 1)[-1]
+        if sample.kind == zenoh.SampleKind.DELETE:
+            with self._cond:
+                self._tokens.discard(zid)
+            self._session_gone(zid, "its liveliness token vanished")
+        else:
+            with self._cond:
+                self._tokens.add(zid)
+
+    def _on_transport(self, event: zenoh.TransportEvent) -> None:
+        """A peer's transport to the robot closed: if it held the claim, the controller is gone."""
+        if event.kind == zenoh.SampleKind.DELETE:
+            self._session_gone(str(event.transport.zid), "its session's transport closed")
+
+    def _session_gone(self, zid: str, how: str) -> None:
         with self._cond:
-            if sample.kind == zenoh.SampleKind.DELETE:
-                logger.warning("%s: controller liveliness token gone", self.info.name)
-                self._controller_alive = False
+            holder = self.claims.holder
+            if self.claims.session_gone(zid):
+                logger.warning("%s: controller %s lost: %s", self.info.name, holder.describe(), how)
                 self._controller_lost = True
                 self._cond.notify_all()
-            else:
-                self._controller_alive = True
+
+    def _on_claim(self, query: zenoh.Query) -> None:
+        """Claim or release (hal/robot/claim.py); the robot holds at once when a claim ends."""
+        links = {}
+        try:
+            for link in self._session.z.info.links():
+                links[str(link.zid)] = link.auth_identifier
+            for tr in self._session.z.info.transports():
+                links.setdefault(str(tr.zid), None)
+        except Exception:  # session closing
+            pass
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        with self._cond:
+            reply, event = self.claims.handle(payload, links, self._tokens, time.monotonic())
+            if event == "released":
+                self._controller_lost = True
+                self._cond.notify_all()
+            if event is not None:
+                holder = self.claims.holder
+                logger.info("%s: claim %s%s", self.info.name, event, f" to {holder.describe()}" if holder else "")
+        query.reply(str(query.key_expr), reply)
 
     def _on_truth_matching(self, status: zenoh.MatchingStatus) -> None:
         self._truth_wanted = status.matching
@@ -153,7 +196,7 @@ class RobotServer:
             "robot": self.info.name, "protocol": PROTOCOL_VERSION, "clock": self.config.clock,
             "seq": self._published, "time": self._frame.time if self._frame is not None else None,
             "ticks": self.ticks, "late_ticks": self.late_ticks,
-            "controller_alive": self._controller_alive,
+            "controller_alive": self.claims.holder is not None, **self.claims.status(),
             "rtt_p50_us": float(np.percentile(rtt, 50)) if n else None,
             "rtt_p99_us": float(np.percentile(rtt, 99)) if n else None,
             "rtt_samples": n, "process_cpu_s": time.process_time(), **fw,
@@ -203,7 +246,8 @@ class RobotServer:
     def _open(self) -> None:
         cfg, k = self.config, self.keys
         set_realtime_priority(cfg.realtime_priority)  # before the session: its threads inherit it
-        s = self._session = Session(zenoh_config(listen=cfg.listen, connect=cfg.connect, mode=cfg.mode))
+        s = self._session = Session(zenoh_config(listen=cfg.listen, connect=cfg.connect, mode=cfg.mode,
+                                                 security=cfg.security, key_prefix=k.prefix))
         z = s.z
         cc = zenoh.CongestionControl.BLOCK if self.lockstep else zenoh.CongestionControl.DROP
         self._pub_frame = s.keep(z.declare_publisher(k.frame, express=True, congestion_control=cc,
@@ -214,8 +258,11 @@ class RobotServer:
         s.keep(self._pub_truth.declare_matching_listener(callback(self._on_truth_matching)))
         # direct: in lock-step the command ticks the robot in zenoh's network thread, no thread hand-over
         s.keep(z.declare_subscriber(k.command, callback(self._on_command, direct=True)))
-        s.keep(z.liveliness().declare_subscriber(k.alive_controller, callback(self._on_controller_liveliness),
+        # the claimer's death, seen from its own session: its transport, or (router) its zid-scoped token
+        s.keep(z.info.declare_transport_events_listener(callback(self._on_transport)))
+        s.keep(z.liveliness().declare_subscriber(f"{k.alive_controller}/*", callback(self._on_controller_liveliness),
                                                  history=True))
+        s.keep(z.declare_queryable(claim_key(k.prefix), callback(self._on_claim)))
         s.keep(z.declare_queryable(k.info, callback(self._on_query)))
         s.keep(z.declare_queryable(k.status, callback(self._on_query)))
         s.keep(z.liveliness().declare_token(k.alive_robot))
@@ -355,18 +402,27 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--lockstep-hold-after", type=float, help="[s] lock-step watchdog (default: --hold-after)")
     p.add_argument("--lockstep-servo-off-after", type=float, help="[s] lock-step (default: --servo-off-after)")
     p.add_argument("--ready-file", help="touched once the robot is served (for scripts and tests)")
+    p.add_argument("--security", metavar="HAL_TOML", help="secure the session with the tls, auth, access and "
+                   "insecure_network entries of [hal.server] in this file (docs/real_backend.md)")
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    listen = a.listen if a.listen is not None else ([] if a.connect else [DEFAULT_ENDPOINT])
+    try:  # before anything is built or served: a bad file or field is a one-line error
+        security = security_from_section(hal_section(a.security).section("server", {}), robot_side=True) \
+            if a.security else Security()
+        check_endpoints(security, [*listen, *a.connect], robot_side=True)
+    except ServotauError as exc:
+        print(f"python -m servotau.hal: error: {exc}", file=sys.stderr)
+        return 2
     factory = import_object(a.robot)
     kwargs = json.loads(a.kwargs)
     robot = factory(a.scenario, **kwargs) if a.scenario else factory(**kwargs)
-    listen = a.listen if a.listen is not None else ([] if a.connect else [DEFAULT_ENDPOINT])
     cfg = ServerConfig(robot=a.name, listen=tuple(listen), connect=tuple(a.connect), mode=a.mode, clock=a.clock,
                        safety=SafetyConfig(a.hold_after, a.servo_off_after,
                                            lockstep_hold_after=a.lockstep_hold_after or a.hold_after,
                                            lockstep_servo_off_after=a.lockstep_servo_off_after or a.servo_off_after),
                        log=a.log, max_ticks=a.max_ticks,
-                       publish_truth=not a.no_truth, realtime_priority=a.realtime_priority)
+                       publish_truth=not a.no_truth, realtime_priority=a.realtime_priority, security=security)
     ready = (lambda: Path(a.ready_file).touch()) if a.ready_file else None
     server = serve(robot, cfg, ready)
     print(json.dumps(server.status()), flush=True)

@@ -14,6 +14,7 @@ import zenoh
 
 from ..errors import HalError
 from .protocol import DEFAULT_ENDPOINT
+from .security import Security, check_endpoints
 
 __all__ = ["DEFAULT_ENDPOINT", "GIL_SWITCH_INTERVAL", "ZENOH_RUNTIME", "Session", "callback", "zenoh_config"]
 
@@ -41,9 +42,15 @@ def zenoh_config(
     connect: Sequence[str] = (),
     mode: str = "peer",
     extra: Mapping[str, Any] | None = None,
+    security: Security | None = None,
+    key_prefix: str | None = None,
 ) -> zenoh.Config:
-    """A Zenoh config: ``mode`` (peer or client), endpoints, multicast scouting off.
+    """A Zenoh config: ``mode`` (peer or client), endpoints, multicast scouting off, and Zenoh's TLS,
+    authentication and access control from ``security`` (:mod:`.security`; ``key_prefix``, the robot's
+    ``servotau/v1/<robot>``, marks the robot side, whose access-control rules name its keys).
 
+    The endpoints are checked against ``security`` first (a tls/ endpoint needs certificates; beyond
+    loopback: TLS, and access control on the robot side): HalError before any session opens.
     ``extra`` maps Zenoh config paths (e.g. ``"transport/link/tx/lease"``) to JSON values.
     """
     if mode not in ("peer", "client", "router"):
@@ -51,17 +58,20 @@ def zenoh_config(
     if not listen and not connect:
         raise HalError("zenoh endpoints: expected at least one listen or connect endpoint, e.g. "
                        f"{DEFAULT_ENDPOINT!r}")
+    security = security or Security()
+    check_endpoints(security, [*listen, *connect], robot_side=key_prefix is not None)
     conf = zenoh.Config()
     settings = {"mode": mode, "scouting/multicast/enabled": False,
                 "listen/endpoints": list(listen), "connect/endpoints": list(connect),
                 # retry a missing peer after 50 ms (default 1 s): a controller may start before the robot
                 "connect/retry": {"period_init_ms": 50, "period_max_ms": 1000, "period_increase_factor": 2},
-                **(extra or {})}
+                **security.zenoh_settings(key_prefix), **(extra or {})}
     for path, value in settings.items():
         try:
             conf.insert_json5(path, json.dumps(value))
         except Exception as exc:  # zenoh raises ZError
-            raise HalError(f"zenoh config {path} = {value!r} rejected: {exc}") from exc
+            shown = "(password hidden)" if path == "transport/auth/usrpwd" else repr(value)
+            raise HalError(f"zenoh config {path} = {shown} rejected: {exc}") from exc
     return conf
 
 
