@@ -5,9 +5,9 @@ in-process backend.
 A command ``(seq, time)`` is, in this order:
 
 - ``future``: it answers a frame not published yet;
-- ``time``: its time is not the time of the frame it answers (known for the last ``HISTORY`` frames);
 - ``replay``: it answers the frame whose command was already applied (a copy never re-arms the watchdog);
 - ``too_old`` (realtime only): it answers a frame more than ``max_age_ticks`` older than the newest;
+- ``time``: its time is not the time of the frame it answers (known for the last ``HISTORY`` frames);
 - stale: it answers a frame older than the current one (lock-step) or than the frame whose command was
   applied last (realtime): counted, not applied, not an error (a late duplicate);
 - else taken.
@@ -50,16 +50,16 @@ class CommandGate:
         """``(verdict, message)``: verdict TAKE, STALE, or a reason of :data:`REJECT_REASONS`."""
         if seq > self.newest:
             return "future", f"answers frame {seq}, not published yet (newest: {self.newest})"
-        i = seq % HISTORY
-        if self._seqs[i] == seq and time != self._times[i]:
-            return "time", f"answering frame {seq} carries time {time!r}: expected its frame's time " \
-                           f"{self._times[i]!r} [s]"
         if seq == self.applied_seq:
             return "replay", f"answers frame {seq}, whose command was already applied"
         age = self.newest - seq
         if not self.lockstep and age > self.max_age_ticks:
             return "too_old", f"answers frame {seq}, {age} ticks old: expected <= max_command_age_ticks = " \
                               f"{self.max_age_ticks}"
+        i = seq % HISTORY
+        if self._seqs[i] == seq and time != self._times[i]:
+            return "time", f"answering frame {seq} carries time {time!r}: expected its frame's time " \
+                           f"{self._times[i]!r} [s]"
         if seq < self.applied_seq or (self.lockstep and seq != self.newest):
             return STALE, f"answers frame {seq}, older than the current one"
         return TAKE, ""
