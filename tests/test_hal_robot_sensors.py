@@ -62,14 +62,16 @@ def test_one_nan_joint_holds_its_own_last_reading():
 
 
 def test_stale_encoders_hold_and_too_long_cuts_the_servos_latched():
-    """A STALE status counts as invalid; invalid longer than invalid_encoders_after: servo off (latched), never a
-    NaN target; last_valid() stays finite for the robot's step."""
+    """A STALE status counts as invalid; invalid longer than invalid_encoders_after (robot ticks x period,
+    whatever the caller's clock says): servo off (latched), never a NaN target; last_valid() stays finite for
+    the robot's step."""
     fw = Firmware(INFO, SafetyConfig(invalid_encoders_after=0.05))
     fw.accept(Q, 0.0)
     fw.output(Q, 0.0)
-    assert fw.output(Q, 0.01, STATUS_STALE) is not None and fw.state == FirmwareState.HOLDING
-    assert fw.output(Q, 0.05, STATUS_STALE) is not None
-    assert fw.output(NAN, 0.07, STATUS_INVALID) is None
+    assert fw.output(Q, 10.0, STATUS_STALE) is not None and fw.state == FirmwareState.HOLDING  # a stalled clock
+    for k in range(49):
+        assert fw.output(Q, 10.0 + k, STATUS_STALE) is not None
+    assert fw.output(NAN, 100.0, STATUS_INVALID) is None  # the 51st tick: 51 ms > 50 ms
     assert fw.state == FirmwareState.SERVO_OFF and fw.flags & FLAG_SERVO_OFF
     assert "encoders invalid or stale" in fw.status()["trip_reason"]
     np.testing.assert_array_equal(fw.last_valid(NAN), Q)

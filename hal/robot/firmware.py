@@ -14,7 +14,8 @@ the servos, or ``None`` once the servos are cut. States (``FLAG_*`` in every fra
   or the encoders went invalid or stale (FLAG_SENSOR_FAULT: hold their last valid reading, per joint; commands
   are not applied). A fresh command resumes RUNNING (once the encoders are valid again).
 - SERVO_OFF (latched) on robot-side faults only: ``|q_des - q| > max_position_error`` on a valid joint (as
-  HRP-2 does), encoders invalid for more than ``invalid_encoders_after`` [s], no valid encoder reading ever,
+  HRP-2 does), encoders invalid for more than ``invalid_encoders_after`` [s] of robot time (ticks x period), no
+  valid encoder reading ever,
   or (if set) no fresh command for ``servo_off_after``. :meth:`reset` (the operator's request, never a
   command) clears it with valid encoders: WAITING, servos on, holding the measured position.
 
@@ -22,7 +23,8 @@ Commands reach :meth:`accept` only once decoded (hal/wire/protocol.py) and admit
 :class:`~.gate.CommandGate`; :meth:`reject` and :meth:`stale` count the others, by reason.
 
 The clock is the caller's: wall time on the server (also while it waits in lock-step), robot time in
-the in-process backend (deterministic). The rate limits count robot ticks (one period each).
+the in-process backend (deterministic). The rate limits and the encoder-fault time count robot ticks (one
+period each).
 """
 
 from __future__ import annotations
@@ -105,7 +107,7 @@ class Firmware:
         self.clamped = False  # the last output was clamped to the joint limits
         self.rate_limited = False  # the last output was bounded by the rate limits
         self.sensor_fault = False  # the encoders are invalid or stale
-        self._t_fault = math.nan  # when they went so [s]
+        self._fault_ticks = 0  # ticks since they went so
         self._q_valid: np.ndarray | None = None  # last valid reading of each joint [rad] (NaN: never valid)
         self._q_cmd: np.ndarray | None = None
         self._t_cmd = -math.inf  # time of the last accepted command [s]
@@ -177,7 +179,7 @@ class Firmware:
             self._q_valid = np.where(valid, q, np.nan)
         else:
             self._q_valid[valid] = q[valid]
-        if self._sensors(valid.all(), now) or self.state == FirmwareState.SERVO_OFF:
+        if self._sensors(valid.all()) or self.state == FirmwareState.SERVO_OFF:
             return None
         st = self.state
         age = now - self._t_cmd
@@ -211,25 +213,27 @@ class Firmware:
                               f"expected <= {self.max_error} rad")
         return out
 
-    def _sensors(self, all_valid: bool, now: float) -> bool:
+    def _sensors(self, all_valid: bool) -> bool:
         """Track an encoder fault; True if it cuts the servos now."""
         if all_valid:
             if self.sensor_fault:
                 self.sensor_fault = False
                 logger.warning("%s: encoders valid again after %.0f ms: holding until a fresh command",
-                               self.info.name, (now - self._t_fault) * 1e3)
+                               self.info.name, self._fault_ticks * self.info.period * 1e3)
             return False
         self.counters["sensor_fault_ticks"] += 1
         if self.state == FirmwareState.SERVO_OFF:
             return False
         if not self.sensor_fault:
-            self.sensor_fault, self._t_fault = True, now
+            self.sensor_fault, self._fault_ticks = True, 0
             if self.state == FirmwareState.RUNNING or self._q_hold is None:
                 self._hold("encoders invalid or stale")
             else:
                 self.hold_reason = "encoders invalid or stale"
-        if now - self._t_fault > self.safety.invalid_encoders_after:
-            self._trip(f"encoders invalid or stale for {(now - self._t_fault) * 1e3:.0f} ms "
+        self._fault_ticks += 1
+        invalid = self._fault_ticks * self.info.period  # [s] of robot time, whatever the wall clock does
+        if invalid > self.safety.invalid_encoders_after + 1e-9:
+            self._trip(f"encoders invalid or stale for {invalid * 1e3:.0f} ms of robot time "
                        f"(invalid_encoders_after = {self.safety.invalid_encoders_after} s)")
             return True
         return False

@@ -60,7 +60,7 @@ class SafetyConfig:
     max_command_age_ticks: int = setting(20, min=0, max=HISTORY - 1)  # realtime: a command answering a frame
     # more ticks older than the newest is rejected
     invalid_encoders_after: float = setting(0.2, unit="s", min=0, strict_min=True)  # encoders invalid or stale
-    # this long: servo off (latched); shorter: hold their last valid reading
+    # this long of robot time (ticks x period): servo off (latched); shorter: hold their last valid reading
     warn_interval: float = setting(1.0, unit="s", min=0)  # minimum wall time between two warnings of one kind
     # Lock-step: the robot waits for each command by design; a controller silent this long of wall time hangs.
     # 40 ms: held within 50 ms of wall time with 10 ms for a loaded machine to wake the robot's loop.
