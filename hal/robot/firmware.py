@@ -12,7 +12,8 @@ the servos, or ``None`` once the servos are cut. States (``FLAG_*`` in every fra
   no fresh command came for ``hold_after`` [s] (``lockstep_hold_after`` in lock-step) or the controller's
   liveliness token vanished (``hold_reason``), a command broke a rate limit with ``limit_action = "trip"``,
   or the encoders went invalid or stale (FLAG_SENSOR_FAULT: hold their last valid reading, per joint; commands
-  are not applied). A fresh command resumes RUNNING (once the encoders are valid again).
+  are not applied). A fresh command resumes RUNNING (once the encoders are valid again). In lock-step the
+  server holds for a hung controller without stepping (:meth:`watchdog`; simulated time stands still).
 - SERVO_OFF (latched) on robot-side faults only: ``|q_des - q| > max_position_error`` on a valid joint (as
   HRP-2 does), encoders invalid for more than ``invalid_encoders_after`` [s] of robot time (ticks x period), no
   valid encoder reading ever,
@@ -181,11 +182,8 @@ class Firmware:
             self._q_valid[valid] = q[valid]
         if self._sensors(valid.all()) or self.state == FirmwareState.SERVO_OFF:
             return None
-        st = self.state
         age = now - self._t_cmd
-        if st == FirmwareState.RUNNING and (self._hold_requested or age > self.safety.hold_after):
-            self._hold("controller lost" if self._hold_requested else f"no fresh command for {age * 1e3:.0f} ms")
-        elif self.state == FirmwareState.WAITING and self._q_hold is None:
+        if not self.watchdog(now) and self.state != FirmwareState.RUNNING and self._q_hold is None:
             self._q_hold = self._q_valid.copy()
         off_after = self.safety.servo_off_after
         if self.state == FirmwareState.HOLDING and off_after is not None and age > off_after:
@@ -212,6 +210,15 @@ class Firmware:
             return self._trip(f'|q_des - q| = {err[i]:.4f} rad on joint "{self.info.joint_names[i]}": '
                               f"expected <= {self.max_error} rad")
         return out
+
+    def watchdog(self, now: float) -> bool:
+        """RUNNING without a fresh command for ``hold_after`` at ``now`` [s] (or with the controller lost):
+        hold the last valid reading from now on. True if a hold began (also run by :meth:`output`)."""
+        age = now - self._t_cmd
+        if self.state != FirmwareState.RUNNING or not (self._hold_requested or age > self.safety.hold_after):
+            return False
+        self._hold("controller lost" if self._hold_requested else f"no fresh command for {age * 1e3:.0f} ms")
+        return True
 
     def _sensors(self, all_valid: bool) -> bool:
         """Track an encoder fault; True if it cuts the servos now."""
@@ -245,7 +252,7 @@ class Firmware:
             self.state = FirmwareState.HOLDING
             self.counters["holds"] += 1
         self.hold_reason = why
-        self._q_hold = self._q_valid.copy()
+        self._q_hold = None if self._q_valid is None else self._q_valid.copy()
         self._hold_requested = False
 
     def _rate_limit(self, out: np.ndarray) -> np.ndarray:

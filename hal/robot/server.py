@@ -6,7 +6,8 @@ firmware (:mod:`servotau.hal.robot.firmware`), step the robot. Clock modes:
 - ``lockstep`` (default): wait for the command answering frame k, then step: as fast as the
   controller, deterministic. Before the first command the robot does not move and frame 0 is
   republished every ``republish_interval`` (late joiners). Without a fresh command the watchdog
-  counts in wall time; once holding, the robot steps one tick per period of wall time.
+  counts in wall time and holds without stepping while the controller lives (:meth:`_run_lockstep`);
+  otherwise, once holding, the robot steps one tick per period of wall time.
 - ``realtime``: one tick per period of wall time (1 kHz on HRP-2); the newest command wins.
 - ``robot``: as realtime, but paced by the robot itself (a real robot's ``step()`` blocks until
   its next tick).
@@ -89,6 +90,7 @@ class RobotServer:
         self._t_published = math.nan  # when it was (last) published, time.monotonic() [s]
         self._controller_alive = False
         self._controller_lost = False
+        self._frozen = False  # lock-step: holding for a hung controller without stepping (_run_lockstep)
         self._rtt = np.zeros(_RTT_WINDOW)
         self._n_rtt = 0
         self.ticks = 0
@@ -125,6 +127,9 @@ class RobotServer:
             else:  # lock-step: the command answering the current frame
                 self.firmware.accept(q_des, t)
                 self.gate.applied(seq)
+                if self._frozen and self.firmware.state == FirmwareState.RUNNING:  # resumed: the watchdog re-arms
+                    self._frozen = False
+                    self._cond.notify_all()
                 try:
                     self._tick(time.monotonic())
                 except BaseException as exc:  # reported by run()
@@ -180,7 +185,7 @@ class RobotServer:
             "robot": self.info.name, "protocol": PROTOCOL_VERSION, "clock": self.config.clock,
             "seq": self._published, "time": self._frame.time if self._frame is not None else None,
             "ticks": self.ticks, "late_ticks": self.late_ticks,
-            "controller_alive": self._controller_alive,
+            "controller_alive": self._controller_alive, "lockstep_frozen": self._frozen,
             "rtt_p50_us": float(np.percentile(rtt, 50)) if n else None,
             "rtt_p99_us": float(np.percentile(rtt, 99)) if n else None,
             "rtt_samples": n, "process_cpu_s": time.process_time(), **fw,
@@ -293,24 +298,36 @@ class RobotServer:
             self._cond.notify_all()
 
     def _run_lockstep(self) -> None:
-        """Watchdog side of lock-step; commands tick the robot from the callback thread."""
+        """Watchdog side of lock-step; commands tick the robot from the callback thread.
+
+        A controller silent for ``hold_after`` of wall time while its liveliness token lives (hung, or slow)
+        makes the robot hold *without stepping*: simulated time stands still, so nothing moves, and the frame is
+        republished flagged HOLDING; the command answering it resumes exactly where the run was (a stall changes
+        nothing in the log). Once the controller is lost, or for any other hold, the robot steps one tick per
+        period of wall time, holding."""
         period, safety, fw = self.info.period, self.firmware.safety, self.firmware
         with self._cond:
             while not self._stop.is_set():
                 now = time.monotonic()
                 state = fw.state
+                if self._frozen and (state != FirmwareState.HOLDING or self._controller_lost):
+                    self._frozen = False  # resumed by a command, or the controller is gone: step on
                 if state != FirmwareState.RUNNING:
                     self._controller_lost = False  # nothing to hold
                 if state == FirmwareState.RUNNING:
                     deadline = -math.inf if self._controller_lost else fw.last_command_time + safety.hold_after
-                elif state == FirmwareState.WAITING:  # no controller yet: the robot does not move
+                elif state == FirmwareState.WAITING or self._frozen:  # the robot does not move
                     deadline = self._t_published + self.config.republish_interval
                 else:  # HOLDING or SERVO_OFF: nobody commands, step in real time
                     deadline = self._t_published + period
                 if now < deadline:
                     self._cond.wait(deadline - now)
-                elif state == FirmwareState.WAITING:
-                    self._publish(truth=False)  # for controllers that join late
+                elif state == FirmwareState.WAITING or self._frozen:
+                    self._publish(truth=False)  # for controllers that join late; flagged HOLDING when frozen
+                elif state == FirmwareState.RUNNING and not self._controller_lost:
+                    fw.watchdog(now)  # a hung controller: hold, frozen
+                    self._frozen = True
+                    self._publish(truth=False)
                 else:
                     self._tick(now)  # the firmware holds (or stays off)
 
