@@ -11,7 +11,7 @@ import zenoh
 from conftest import FRAME_TIMEOUT
 from support.hal import endpoint, free_port, robot_server, robot_status
 
-from servotau.hal import STATUS_INVALID, ZenohBackend, keys
+from servotau.hal import STATUS_INVALID, SafetyConfig, ZenohBackend, keys
 from servotau.hal.wire.protocol import HEADER, MAGIC, PROTOCOL_VERSION, MsgType, encode_command
 from servotau.hal.wire.session import Session, zenoh_config
 
@@ -102,12 +102,12 @@ def test_realtime_rejects_replays_old_commands_and_bad_headers(tmp_path):
 
 
 def test_hung_controller_in_lockstep_holds_and_a_fresh_command_resumes(tmp_path):
-    """Lock-step with the shipped watchdog (40 ms of wall time): a controller that stops commanding but stays
+    """Lock-step with the shipped watchdog (35 ms of wall time): a controller that stops commanding but stays
     connected (hung, its liveliness token still there) makes the robot hold without stepping (simulated time
     stands still: nothing moves; the frame is republished flagged HOLDING), never cut its servos; its command
     answering that frame resumes the run where it was."""
     port = free_port()
-    with robot_server(tmp_path, port, lockstep_hold_after=0.04) as server:
+    with robot_server(tmp_path, port, lockstep_hold_after=SafetyConfig().lockstep_hold_after) as server:
         with ZenohBackend("fake", connect=[endpoint(port)], frame_timeout=FRAME_TIMEOUT, truth=False) as b:
             for _ in range(100):
                 b.read()
@@ -117,7 +117,7 @@ def test_hung_controller_in_lockstep_holds_and_a_fresh_command_resumes(tmp_path)
             f = b.read()  # the frame the robot waits on, republished flagged HOLDING
             assert b.robot_state == "holding" and f.seq == 100
             b.write({})
-            g = b.read()  # published after the resumed tick (the next stall would hold again after 40 ms)
+            g = b.read()  # published after the resumed tick (the next stall would hold again after 35 ms)
         assert server.poll() is None
     assert st["state"] == "HOLDING" and st["hold_reason"].startswith("no fresh command"), st
     assert st["controller_alive"] and st["lockstep_frozen"] and st["trips"] == 0

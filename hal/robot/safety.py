@@ -48,7 +48,7 @@ class JointRateLimits:
 class SafetyConfig:
     """Watchdog, limits and command checks of the robot-side firmware (see :mod:`.firmware`)."""
 
-    hold_after: float = setting(0.04, unit="s", min=0, strict_min=True)  # no fresh command: hold the position
+    hold_after: float = setting(0.035, unit="s", min=0, strict_min=True)  # no fresh command: hold the position
     servo_off_after: float | None = setting(None, unit="s", min="hold_after", strict_min=True)  # no fresh command
     # for this long: servo off (latched); None: hold indefinitely (a missing controller is not a robot fault)
     max_position_error: float | None = setting(None, unit="rad", min=0, strict_min=True)  # |q_des - q| trip;
@@ -63,8 +63,9 @@ class SafetyConfig:
     # this long of robot time (ticks x period): servo off (latched); shorter: hold their last valid reading
     warn_interval: float = setting(1.0, unit="s", min=0)  # minimum wall time between two warnings of one kind
     # Lock-step: the robot waits for each command by design; a controller silent this long of wall time hangs.
-    # 40 ms: held within 50 ms of wall time with 10 ms for a loaded machine to wake the robot's loop.
-    lockstep_hold_after: float = setting(0.04, unit="s", min=0, strict_min=True)
+    # 35 ms (and hold_after): a hung controller is seen held within 50 ms of wall time, with 15 ms for a loaded
+    # machine to wake the robot's loop and deliver the frame (with 40 ms: 40.6-50.3 ms seen, 20 runs, load 5-6).
+    lockstep_hold_after: float = setting(0.035, unit="s", min=0, strict_min=True)
     lockstep_servo_off_after: float | None = setting(None, unit="s", min="lockstep_hold_after", strict_min=True)
 
     def __post_init__(self):
