@@ -15,10 +15,16 @@ the servos, or ``None`` once the servos are cut. States (``FLAG_*`` in every fra
   are not applied). A fresh command resumes RUNNING (once the encoders are valid again). In lock-step the
   server holds for a hung controller without stepping (:meth:`watchdog`; simulated time stands still).
 - SERVO_OFF (latched) on robot-side faults only: ``|q_des - q| > max_position_error`` on a valid joint (as
-  HRP-2 does), encoders invalid for more than ``invalid_encoders_after`` [s] of robot time (ticks x period), no
-  valid encoder reading ever,
-  or (if set) no fresh command for ``servo_off_after``. :meth:`reset` (the operator's request, never a
-  command) clears it with valid encoders: WAITING, servos on, holding the measured position.
+  HRP-2 does), encoders invalid for more than ``invalid_encoders_after`` [s] of robot time (ticks x period),
+  no valid encoder reading ever, or (if set) no fresh command for ``servo_off_after``. :meth:`reset` (the
+  operator's request, never a command) clears it with valid encoders: WAITING, servos on, holding the
+  measured position.
+
+Transitions, in short (docs/protocol.md "State machine")::
+
+    WAITING --command--> RUNNING --watchdog / controller lost / rate trip / encoders--> HOLDING
+    HOLDING --fresh command, encoders valid--> RUNNING
+    any --position error / encoders invalid too long--> SERVO_OFF --operator reset--> WAITING
 
 Commands reach :meth:`accept` only once decoded (hal/wire/protocol.py) and admitted by
 :class:`~.gate.CommandGate`; :meth:`reject` and :meth:`stale` count the others, by reason.
