@@ -13,7 +13,7 @@ Layout (defaults in config/hal.toml)::
     [hal.inprocess]   robot = "module:callable", scenario, log, [hal.inprocess.kwargs]
     [hal.replay]      log
     [hal.server]      robot side: robot, listen, connect, mode, clock, log, max_ticks, ...
-    [hal.safety]      robot-side firmware: hold_after, servo_off_after, max_position_error
+    [hal.safety]      robot-side firmware: watchdog, rate limits, command age, encoder faults (hal/robot/safety.py)
 """
 
 from __future__ import annotations

@@ -176,6 +176,10 @@ class SimRobot:
         """Cut every joint's servo (latched): no motor current from now on."""
         self.servo.enabled = False
 
+    def servo_on(self) -> None:
+        """Servos back on (the operator's reset of a latched servo-off, hal/robot/operator.py)."""
+        self.servo.enabled = True
+
     def ground_truth(self) -> GroundTruth:
         """What actually happened at the current tick (evaluation only)."""
         d = self.data

@@ -22,7 +22,8 @@ def test_same_seed_same_log(tmp_path):
 
 
 def test_watchdog_counts_robot_time():
-    """Reading without writing steps with no fresh command: hold after hold_after, off after servo_off_after."""
+    """Reading without writing steps with no fresh command: hold after hold_after, off after servo_off_after
+    (when set: by default the robot holds indefinitely, tests/test_hal_robot_firmware.py)."""
     robot = FakeRobot()
     b = InProcessBackend(robot, SafetyConfig(hold_after=0.01, servo_off_after=0.05))
     f = b.read()
@@ -38,11 +39,14 @@ def test_watchdog_counts_robot_time():
     assert np.abs(f.q - f_hold.q).max() < 0.01
 
 
-def test_second_write_for_a_frame_is_stale():
-    """The first command answering a frame wins; later ones are counted stale (as over Zenoh)."""
+def test_second_write_for_a_frame_is_a_rejected_replay():
+    """The first command answering a frame wins; another one for the same frame is rejected as a replay, an
+    older one is stale (as over Zenoh)."""
     b = InProcessBackend(FakeRobot())
     f = b.read()
-    b.write({"J00": f.q[0] + 0.01})
-    b.write({"J00": f.q[0] + 0.02})
+    b.write({"J00": f.q[0] + 0.001})
+    b.write({"J00": f.q[0] + 0.002})
     g = b.read()
-    assert g.seq == f.seq + 1 and b.status()["commands_stale"] == 1 and b.status()["commands_accepted"] == 1
+    st = b.status()
+    assert g.seq == f.seq + 1 and st["commands_accepted"] == 1
+    assert st["commands_rejected"] == 1 and st["rejected"]["replay"] == 1 and st["commands_stale"] == 0

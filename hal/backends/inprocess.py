@@ -4,24 +4,31 @@ experiments."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from servotau.config import Section
 
 from ..backend import Backend
 from ..config import import_object
-from ..errors import HalError
+from ..errors import HalError, MalformedMessage
 from ..log import LogWriter
+from ..robot import operator
 from ..robot.config import safety_config
-from ..robot.firmware import LOG_EXTRA, Firmware, SafetyConfig
+from ..robot.firmware import LOG_EXTRA, Firmware, SafetyConfig, checked_frame
+from ..robot.gate import STALE, TAKE, CommandGate
 from ..robot.served import ServedRobot
 from ..types import GroundTruth, SensorFrame
+from ..wire.protocol import decode_command, reject_reason
 
 
 class InProcessBackend(Backend):
     """Drives ``robot`` directly: :meth:`write` steps it once (the first command answering a frame
-    wins, later ones are counted stale); :meth:`read` after :meth:`read` without a write steps it
-    with no fresh command (the watchdog holds after ``hold_after`` [s] of robot time).
+    wins, a copy of it is rejected as a replay); :meth:`read` after :meth:`read` without a write steps it
+    with no fresh command (the watchdog holds after ``hold_after`` [s] of robot time). :meth:`receive`
+    takes a command as wire bytes, through the server's checks; :meth:`operator` answers an operator
+    request (docs/protocol.md "State machine").
 
     Args:
         robot: the served robot.
@@ -32,7 +39,8 @@ class InProcessBackend(Backend):
     def __init__(self, robot: ServedRobot, safety: SafetyConfig | None = None, log: str | None = None):
         self.robot = robot
         self.firmware = Firmware(robot.info, safety)
-        self._current = robot.read()  # frame of the current tick
+        self.gate = CommandGate(lockstep=True, max_age_ticks=self.firmware.safety.max_command_age_ticks)
+        self._current = self._observe(robot.read())  # frame of the current tick
         self._stepped_seq = -1  # seq of the last frame the robot stepped past
         self._servo_off = False
         self._want_truth = False  # ground_truth() was called: keep the truth of each stepped tick
@@ -48,18 +56,23 @@ class InProcessBackend(Backend):
         truth = self.robot.ground_truth() if self._log is not None or self._want_truth else None
         if self._want_truth:
             self._truth_before_step = (frame.seq, truth)
-        q_apply = fw.output(frame.q, frame.time)
+        q_apply = fw.output(frame.q, frame.time, int(frame.status[0]))
         if self._log is not None:
             self._log.append(frame, q_apply, truth, {"hal/state": float(fw.state), "hal/wall_time": np.nan})
         if q_apply is None:
             if not self._servo_off:
                 self.robot.servo_off()
                 self._servo_off = True
-            self.robot.step(np.array(frame.q, dtype=float))
+            self.robot.step(fw.last_valid(frame.q))
         else:
             self.robot.step(q_apply)
         self._stepped_seq = frame.seq
-        self._current = self.robot.read()
+        self._current = self._observe(self.robot.read())
+
+    def _observe(self, frame: SensorFrame) -> SensorFrame:
+        frame = checked_frame(frame)
+        self.gate.published(frame.seq, frame.time)
+        return frame
 
     def read(self, timeout: float | None = None) -> SensorFrame:
         if self._last_read is not None and self._current.seq == self._last_read.seq:
@@ -67,11 +80,38 @@ class InProcessBackend(Backend):
         return self._returned(self._current)
 
     def _send(self, q_des: np.ndarray, answers: SensorFrame) -> None:
-        if answers.seq <= self._stepped_seq:
+        self._take(answers.seq, answers.time, q_des)
+
+    def _take(self, seq: int, time: float, q_des: np.ndarray) -> str:
+        verdict, why = self.gate.check(seq, time)
+        if verdict == STALE:
             self.firmware.stale()
-            return
-        self.firmware.accept(q_des, self._current.time)
-        self._step()
+        elif verdict != TAKE:
+            self.firmware.reject(verdict, why)
+        else:
+            self.firmware.accept(q_des, self._current.time)
+            self.gate.applied(seq)
+            self._step()
+        return verdict
+
+    def receive(self, payload: bytes) -> str:
+        """Take a command as wire bytes, checked as the server checks them (docs/protocol.md
+        "Validation"): the verdict, "take", "stale" or the reason it was rejected (gate.REJECT_REASONS)."""
+        try:
+            seq, time, q_des = decode_command(payload, self.info.joint_names)
+        except MalformedMessage as exc:
+            reason = reject_reason(exc)
+            self.firmware.reject(reason, str(exc))
+            return reason
+        return self._take(seq, time, np.array(q_des))
+
+    def operator(self, request: dict | bytes) -> dict:
+        """Answer an operator request (``{"action": "reset"}``) as the server's ``.../operator`` does."""
+        payload = request if isinstance(request, bytes) else json.dumps(request).encode()
+        body, did = operator.answer(self.firmware, self.robot, self._current, payload)
+        if did:
+            self._servo_off = False
+        return json.loads(body)
 
     def ground_truth(self) -> GroundTruth | None:
         """Ground truth of the tick of the last frame read (once the robot has stepped past it, only

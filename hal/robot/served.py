@@ -25,5 +25,8 @@ class ServedRobot(Protocol):
     def servo_off(self) -> None:
         """Cut the servos (latched): no motor current from now on; :meth:`step` still advances time."""
 
+    # Optional: ``servo_on()`` turns the servos back on after servo_off() (the operator's reset,
+    # hal/robot/operator.py); a robot without it is reset by restarting its process.
+
     def ground_truth(self) -> GroundTruth | None:
         """Simulator state of the current tick; None on a real robot."""

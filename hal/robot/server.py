@@ -6,7 +6,8 @@ firmware (:mod:`servotau.hal.robot.firmware`), step the robot. Clock modes:
 - ``lockstep`` (default): wait for the command answering frame k, then step: as fast as the
   controller, deterministic. Before the first command the robot does not move and frame 0 is
   republished every ``republish_interval`` (late joiners). Without a fresh command the watchdog
-  counts in wall time; once holding, the robot steps one tick per period of wall time.
+  counts in wall time and holds without stepping while the controller lives (:meth:`_run_lockstep`);
+  otherwise, once holding, the robot steps one tick per period of wall time.
 - ``realtime``: one tick per period of wall time (1 kHz on HRP-2); the newest command wins.
 - ``robot``: as realtime, but paced by the robot itself (a real robot's ``step()`` blocks until
   its next tick).
@@ -30,18 +31,29 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
+from servotau.config import Section
 from servotau.errors import ServotauError
 
 from ..config import import_object
-from ..errors import MalformedMessage, ProtocolVersionMismatch
+from ..errors import HalError, MalformedMessage
 from ..log import LogWriter
 from ..registry import hal_section
-from ..wire.protocol import PROTOCOL_VERSION, decode_command, encode_frame, encode_truth, info_to_json, keys
+from ..wire.protocol import (
+    PROTOCOL_VERSION,
+    decode_command,
+    encode_frame,
+    encode_truth,
+    info_to_json,
+    keys,
+    reject_reason,
+)
 from ..wire.security import Security, check_endpoints, security_from_section
 from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
+from . import operator
 from .claim import ClaimTable, claim_key
 from .config import CLOCKS, MODES, ServerConfig
-from .firmware import LOG_EXTRA, Firmware, FirmwareState, SafetyConfig
+from .firmware import LOG_EXTRA, Firmware, FirmwareState, SafetyConfig, checked_frame
+from .gate import STALE, TAKE, CommandGate
 from .realtime import set_realtime_priority, set_timer_slack
 from .served import ServedRobot
 
@@ -65,6 +77,7 @@ class RobotServer:
         self.lockstep = self.config.clock == "lockstep"
         safety = self.config.safety.for_lockstep() if self.lockstep else self.config.safety
         self.firmware = Firmware(self.info, safety)
+        self.gate = CommandGate(self.lockstep, safety.max_command_age_ticks)
         # Everything below is guarded by _cond; a tick runs in the thread that triggers it: the command
         # callback (zenoh's network thread) in lock-step, no thread hand-off on the critical path; else
         # the run() thread.
@@ -76,11 +89,11 @@ class RobotServer:
         self._frame = None  # current frame: published, not stepped yet
         self._truth = None
         self._servo_off_sent = False
-        self._pending: tuple[np.ndarray, float] | None = None  # real time: newest (q_des, receive time)
+        self._pending: tuple[np.ndarray, float, int] | None = None  # real time: newest (q_des, receive time, seq)
         self._published = -1  # seq of the last published frame
         self._t_published = math.nan  # when it was (last) published, time.monotonic() [s]
-        self._last_accepted = -1  # real-time: seq answered by the newest accepted command
         self._controller_lost = False
+        self._frozen = False  # lock-step: holding for a hung controller without stepping (_run_lockstep)
         self.claims = ClaimTable()  # who controls the robot (hal/robot/claim.py), guarded by _cond
         self._tokens: set[str] = set()  # zids whose alive/controller/<zid> token is alive, guarded by _cond
         self._rtt = np.zeros(_RTT_WINDOW)
@@ -94,42 +107,42 @@ class RobotServer:
         t = time.monotonic()
         buf = sample.payload.to_bytes()
         try:
-            seq, _, q_des = decode_command(buf, self.info.joint_names)
-        except ProtocolVersionMismatch as exc:
-            with self._cond:
-                self.firmware.reject(str(exc), version=True)
-            return
+            seq, t_cmd, q_des = decode_command(buf, self.info.joint_names)
         except MalformedMessage as exc:
             with self._cond:
-                self.firmware.reject(str(exc))
+                self.firmware.reject(reject_reason(exc), str(exc))
             return
         with self._cond:
-            if seq > self._published:
-                self.firmware.reject(f"answers frame {seq}, not published yet (last: {self._published})")
+            verdict, why = self.gate.check(seq, t_cmd)  # docs/protocol.md "Validation"
+            if verdict not in (TAKE, STALE):
+                self.firmware.reject(verdict, why)
                 return
-            if seq == self._published:  # round trip: frame published -> its command received
+            if seq == self._published and verdict == TAKE:  # round trip: frame published -> its command received
                 self._rtt[self._n_rtt % _RTT_WINDOW] = t - self._t_published
                 self._n_rtt += 1
             if not self._serving:
                 return
             if not self.claims.allows(sample.attachment.to_bytes() if sample.attachment is not None else None):
                 return  # not from the controller holding the claim: rejected, counted
-            if not self.lockstep:
-                if seq >= self._last_accepted:  # real time: the newest command wins
-                    self._pending = (q_des, t)
-                    self._last_accepted = seq
+            if verdict == STALE:
+                self.firmware.stale()
+            elif not self.lockstep:  # real time: the newest command wins, applied at the end of the tick
+                if self._pending is None or seq >= self._pending[2]:
+                    self._pending = (q_des, t, seq)
                 else:
                     self.firmware.stale()
-            elif seq == self._frame.seq:  # lock-step: the command answering the current frame
+            else:  # lock-step: the command answering the current frame
                 self.firmware.accept(q_des, t)
+                self.gate.applied(seq)
+                if self._frozen and self.firmware.state == FirmwareState.RUNNING:  # resumed: the watchdog re-arms
+                    self._frozen = False
+                    self._cond.notify_all()
                 try:
                     self._tick(time.monotonic())
                 except BaseException as exc:  # reported by run()
                     self._error = exc
                     self._stop.set()
                     self._cond.notify_all()
-            else:
-                self.firmware.stale()
 
     def _on_controller_liveliness(self, sample: zenoh.Sample) -> None:
         """A claiming session's own token ``.../alive/controller/<zid>`` came or vanished (through a router)."""
@@ -181,8 +194,26 @@ class RobotServer:
 
     def _on_query(self, query: zenoh.Query) -> None:
         key = str(query.key_expr)
-        body = info_to_json(self.info) if key == self.keys.info else json.dumps(self.status())
+        if key == self.keys.operator:
+            body = self._operator(query.payload.to_bytes() if query.payload is not None else None)
+        else:
+            body = info_to_json(self.info) if key == self.keys.info else json.dumps(self.status())
         query.reply(key, body)
+
+    def _operator(self, payload: bytes | None) -> str:
+        """Answer an operator request (hal/robot/operator.py); a reset republishes the frame with its state."""
+        with self._cond:
+            if self._frame is None:
+                return json.dumps({"ok": False, "state": self.firmware.state.name, "error": "not serving yet"})
+            body, did = operator.answer(self.firmware, self.robot, self._frame, payload)
+            logger.warning("%s: operator request %r: %s", self.info.name, payload[:200] if payload else payload, body)
+            if did:
+                self._servo_off_sent = False
+                self._pending = None
+                if self._serving:
+                    self._publish(truth=False)
+                self._cond.notify_all()
+            return body
 
     # -- public ------------------------------------------------------------------------------------
     def status(self) -> dict:
@@ -197,6 +228,7 @@ class RobotServer:
             "seq": self._published, "time": self._frame.time if self._frame is not None else None,
             "ticks": self.ticks, "late_ticks": self.late_ticks,
             "controller_alive": self.claims.holder is not None, **self.claims.status(),
+            "lockstep_frozen": self._frozen,
             "rtt_p50_us": float(np.percentile(rtt, 50)) if n else None,
             "rtt_p99_us": float(np.percentile(rtt, 99)) if n else None,
             "rtt_samples": n, "process_cpu_s": time.process_time(), **fw,
@@ -220,7 +252,7 @@ class RobotServer:
                 self._log = LogWriter(cfg.log, self.info, truth=True, extra=LOG_EXTRA,
                                       metadata={"servotau.source": "server", "servotau.clock": cfg.clock})
             with self._cond:
-                self._frame = self.robot.read()
+                self._frame = checked_frame(self.robot.read())
                 self._serving = True
                 self._publish()
             if self.lockstep:
@@ -265,6 +297,7 @@ class RobotServer:
         s.keep(z.declare_queryable(claim_key(k.prefix), callback(self._on_claim)))
         s.keep(z.declare_queryable(k.info, callback(self._on_query)))
         s.keep(z.declare_queryable(k.status, callback(self._on_query)))
+        s.keep(z.declare_queryable(k.operator, callback(self._on_query)))
         s.keep(z.liveliness().declare_token(k.alive_robot))
         if self.on_ready is not None:
             self.on_ready()
@@ -276,6 +309,7 @@ class RobotServer:
         frame = self._frame
         self._published = frame.seq
         self._t_published = time.monotonic()
+        self.gate.published(frame.seq, frame.time)
         self._pub_frame.put(encode_frame(frame, self.firmware.flags))
         send = self.config.publish_truth and self._truth_wanted
         if truth:  # after the frame: off the controller's critical path; only if somebody wants it
@@ -289,19 +323,19 @@ class RobotServer:
         if self._controller_lost:
             self._controller_lost = False
             fw.controller_lost()
-        q_apply = fw.output(frame.q, now)
+        q_apply = fw.output(frame.q, now, int(frame.status[0]))
         state = float(fw.state)
         if q_apply is None:
             if not self._servo_off_sent:
                 robot.servo_off()
                 self._servo_off_sent = True
-            robot.step(np.array(frame.q, dtype=float))
+            robot.step(fw.last_valid(frame.q))  # finite even with NaN encoders; no current flows
         else:
             robot.step(q_apply)
         self.ticks += 1
         done = self.config.max_ticks is not None and self.ticks >= self.config.max_ticks
         if not done:
-            self._frame = robot.read()
+            self._frame = checked_frame(robot.read())
             self._publish()
         if self._log is not None:  # the row of tick k, once frame k+1 is on its way
             self._log.append(frame, q_apply, truth, {"hal/state": state, "hal/wall_time": now})
@@ -311,24 +345,36 @@ class RobotServer:
             self._cond.notify_all()
 
     def _run_lockstep(self) -> None:
-        """Watchdog side of lock-step; commands tick the robot from the callback thread."""
+        """Watchdog side of lock-step; commands tick the robot from the callback thread.
+
+        A controller silent for ``hold_after`` of wall time while its liveliness token lives (hung, or slow)
+        makes the robot hold *without stepping*: simulated time stands still, so nothing moves, and the frame is
+        republished flagged HOLDING; the command answering it resumes exactly where the run was (a stall changes
+        nothing in the log). Once the controller is lost, or for any other hold, the robot steps one tick per
+        period of wall time, holding."""
         period, safety, fw = self.info.period, self.firmware.safety, self.firmware
         with self._cond:
             while not self._stop.is_set():
                 now = time.monotonic()
                 state = fw.state
+                if self._frozen and (state != FirmwareState.HOLDING or self._controller_lost):
+                    self._frozen = False  # resumed by a command, or the controller is gone: step on
                 if state != FirmwareState.RUNNING:
                     self._controller_lost = False  # nothing to hold
                 if state == FirmwareState.RUNNING:
                     deadline = -math.inf if self._controller_lost else fw.last_command_time + safety.hold_after
-                elif state == FirmwareState.WAITING:  # no controller yet: the robot does not move
+                elif state == FirmwareState.WAITING or self._frozen:  # the robot does not move
                     deadline = self._t_published + self.config.republish_interval
                 else:  # HOLDING or SERVO_OFF: nobody commands, step in real time
                     deadline = self._t_published + period
                 if now < deadline:
                     self._cond.wait(deadline - now)
-                elif state == FirmwareState.WAITING:
-                    self._publish(truth=False)  # for controllers that join late
+                elif state == FirmwareState.WAITING or self._frozen:
+                    self._publish(truth=False)  # for controllers that join late; flagged HOLDING when frozen
+                elif state == FirmwareState.RUNNING and not self._controller_lost:
+                    fw.watchdog(now)  # a hung controller: hold, frozen
+                    self._frozen = True
+                    self._publish(truth=False)
                 else:
                     self._tick(now)  # the firmware holds (or stays off)
 
@@ -350,7 +396,9 @@ class RobotServer:
                 if self._stop.is_set():
                     break
                 if self._pending is not None:
-                    self.firmware.accept(*self._pending)
+                    q_des, t_recv, seq = self._pending
+                    self.firmware.accept(q_des, t_recv)
+                    self.gate.applied(seq)
                     self._pending = None
                 self._tick(now)
 
@@ -380,6 +428,21 @@ def serve(robot: ServedRobot, config: ServerConfig | None = None,
     return server
 
 
+def _safety_of(a) -> SafetyConfig:
+    """[hal.safety] from ``--safety`` (JSON) and the watchdog options, which override it."""
+    given = {"hold_after": a.hold_after, "servo_off_after": a.servo_off_after,
+             "lockstep_hold_after": a.lockstep_hold_after or a.hold_after,
+             "lockstep_servo_off_after": a.lockstep_servo_off_after or a.servo_off_after}
+    try:
+        extra = json.loads(a.safety)
+    except ValueError as exc:
+        raise HalError(f"--safety {a.safety!r}: expected a JSON object of [hal.safety] settings ({exc})") from None
+    if not isinstance(extra, dict):
+        raise HalError(f"--safety {a.safety!r}: expected a JSON object of [hal.safety] settings")
+    return SafetyConfig.from_section(
+        Section({**extra, **{k: v for k, v in given.items() if v is not None}}, "--safety", ""))
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m servotau.hal``: serve a robot built from an import string."""
     p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0])
@@ -397,10 +460,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--realtime-priority", type=int, default=ServerConfig.realtime_priority,
                    help="SCHED_FIFO priority 1..99 of the process (0: ordinary scheduling; needs root or "
                         "CAP_SYS_NICE)")
-    p.add_argument("--hold-after", type=float, default=SafetyConfig.hold_after, help="[s]")
-    p.add_argument("--servo-off-after", type=float, default=SafetyConfig.servo_off_after, help="[s]")
+    p.add_argument("--hold-after", type=float, help=f"[s] (default {SafetyConfig.hold_after})")
+    p.add_argument("--servo-off-after", type=float, help="[s] no fresh command: servo off (default: never)")
     p.add_argument("--lockstep-hold-after", type=float, help="[s] lock-step watchdog (default: --hold-after)")
     p.add_argument("--lockstep-servo-off-after", type=float, help="[s] lock-step (default: --servo-off-after)")
+    p.add_argument("--safety", default="{}", help="JSON object of [hal.safety] settings (hal/robot/safety.py), "
+                                                  'e.g. \'{"limit_action": "trip", "max_command_age_ticks": 5}\'; '
+                                                  "the options above override it")
     p.add_argument("--ready-file", help="touched once the robot is served (for scripts and tests)")
     p.add_argument("--security", metavar="HAL_TOML", help="secure the session with the tls, auth, access and "
                    "insecure_network entries of [hal.server] in this file (docs/real_backend.md)")
@@ -411,6 +477,7 @@ def main(argv: list[str] | None = None) -> int:
         security = security_from_section(hal_section(a.security).section("server", {}), robot_side=True) \
             if a.security else Security()
         check_endpoints(security, [*listen, *a.connect], robot_side=True)
+        safety = _safety_of(a)
     except ServotauError as exc:
         print(f"python -m servotau.hal: error: {exc}", file=sys.stderr)
         return 2
@@ -418,9 +485,7 @@ def main(argv: list[str] | None = None) -> int:
     kwargs = json.loads(a.kwargs)
     robot = factory(a.scenario, **kwargs) if a.scenario else factory(**kwargs)
     cfg = ServerConfig(robot=a.name, listen=tuple(listen), connect=tuple(a.connect), mode=a.mode, clock=a.clock,
-                       safety=SafetyConfig(a.hold_after, a.servo_off_after,
-                                           lockstep_hold_after=a.lockstep_hold_after or a.hold_after,
-                                           lockstep_servo_off_after=a.lockstep_servo_off_after or a.servo_off_after),
+                       safety=safety,
                        log=a.log, max_ticks=a.max_ticks,
                        publish_truth=not a.no_truth, realtime_priority=a.realtime_priority, security=security)
     ready = (lambda: Path(a.ready_file).touch()) if a.ready_file else None

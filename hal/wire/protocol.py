@@ -16,7 +16,8 @@ Every message is a 32-byte little-endian header followed by a float64 block::
     ...  2+n_ft          uint8 sensor status (frame only, STATUS_NAMES order)
 
 Decoding validates everything and raises :class:`MalformedMessage` (or its subclass
-:class:`ProtocolVersionMismatch`) with the reason; a malformed command is never applied.
+:class:`ProtocolVersionMismatch`) with the reason, and a short reason code in its ``reason`` attribute
+(:func:`reject_reason`); a malformed command is never applied.
 """
 
 from __future__ import annotations
@@ -48,6 +49,8 @@ FLAG_WAITING = 1 << 0  # no command received yet: holding the initial position
 FLAG_HOLDING = 1 << 1  # watchdog: no fresh command, holding the measured position
 FLAG_SERVO_OFF = 1 << 2  # servos cut (latched): no motor current
 FLAG_CLAMPED = 1 << 3  # the command applied at this tick was clamped to the joint limits
+FLAG_RATE_LIMITED = 1 << 4  # the command applied at this tick was bounded by the velocity/acceleration limits
+FLAG_SENSOR_FAULT = 1 << 5  # the encoders are invalid or stale: holding their last valid reading
 
 _F8 = np.dtype("<f8")
 _ROBOT_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
@@ -93,6 +96,7 @@ class Keys:
     status: str  # queryable: firmware state, counters, timing as JSON
     alive_robot: str  # liveliness token of the robot process
     alive_controller: str  # liveliness token of the controller process
+    operator: str  # queryable: operator requests as JSON (``{"action": "reset"}``), answered as JSON
 
 
 def keys(robot: str) -> Keys:
@@ -101,10 +105,23 @@ def keys(robot: str) -> Keys:
         raise MalformedMessage(f"robot name {robot!r}: expected letters, digits, '_', '.' or '-' only")
     p = f"{KEY_ROOT}/v{PROTOCOL_VERSION}/{robot}"
     return Keys(p, f"{p}/frame", f"{p}/command", f"{p}/truth", f"{p}/info", f"{p}/status",
-                f"{p}/alive/robot", f"{p}/alive/controller")
+                f"{p}/alive/robot", f"{p}/alive/controller", f"{p}/operator")
 
 
 # ---------------------------------------------------------------------------------------------- header
+
+def _bad(reason: str, msg: str, cls: type[MalformedMessage] = MalformedMessage) -> MalformedMessage:
+    """A decoding error with its reason code (see :func:`reject_reason`)."""
+    exc = cls(msg)
+    exc.reason = reason
+    return exc
+
+
+def reject_reason(exc: MalformedMessage) -> str:
+    """Reason code of a decoding error: ``header`` (size, magic, type), ``version``, ``time`` (not finite),
+    ``flags`` (not 0 in a command), ``counts`` (joints, F/T sensors, values, length) or ``values`` (NaN/inf)."""
+    return getattr(exc, "reason", "version" if isinstance(exc, ProtocolVersionMismatch) else "header")
+
 
 def decode_header(buf: bytes, expected: MsgType | None = None) -> Header:
     """Check magic, version and type of a message and return its header."""
@@ -116,21 +133,21 @@ def _unpack(buf: bytes, expected: int) -> tuple:
     """Raw header tuple ``(magic, version, type, flags, seq, time, n_joints, n_ft, n_values)``, checked
     (``expected``: a MsgType, or 0 for any)."""
     if len(buf) < HEADER_SIZE:
-        raise MalformedMessage(f"message of {len(buf)} bytes: expected at least the {HEADER_SIZE}-byte header")
+        raise _bad("header", f"message of {len(buf)} bytes: expected at least the {HEADER_SIZE}-byte header")
     h = HEADER.unpack_from(buf)
     if h[0] != MAGIC or h[1] != PROTOCOL_VERSION or not (h[2] == expected or (not expected and 0 < h[2] <= 3)) \
             or not math.isfinite(h[5]):
         magic, version, mtype, _, _, t = h[:6]
         if magic != MAGIC:
-            raise MalformedMessage(f"bad magic {magic!r}: expected {MAGIC!r} (not a servotau message)")
+            raise _bad("header", f"bad magic {magic!r}: expected {MAGIC!r} (not a servotau message)")
         if version != PROTOCOL_VERSION:
-            raise ProtocolVersionMismatch(
-                f"protocol version {version}: expected {PROTOCOL_VERSION} (update the older peer)")
+            raise _bad("version", f"protocol version {version}: expected {PROTOCOL_VERSION} (update the older peer)",
+                       ProtocolVersionMismatch)
         if mtype not in set(MsgType):
-            raise MalformedMessage(f"message type {mtype}: expected one of {[int(m) for m in MsgType]}")
+            raise _bad("header", f"message type {mtype}: expected one of {[int(m) for m in MsgType]}")
         if expected and mtype != expected:
-            raise MalformedMessage(f"message type {MsgType(mtype).name}: expected {MsgType(expected).name}")
-        raise MalformedMessage(f"{MsgType(mtype).name} time = {t}: expected a finite robot time [s]")
+            raise _bad("header", f"message type {MsgType(mtype).name}: expected {MsgType(expected).name}")
+        raise _bad("time", f"{MsgType(mtype).name} time = {t}: expected a finite robot time [s]")
     return h
 
 
@@ -139,9 +156,9 @@ def _check_size(buf: bytes, h: tuple, n_values: int, tail: int) -> None:
     if h[8] != n_values or len(buf) != size:
         what = MsgType(h[2]).name
         if h[8] != n_values:
-            raise MalformedMessage(f"{what} declares {h[8]} values: expected {n_values} "
-                                   f"for {h[6]} joints and {h[7]} F/T sensors")
-        raise MalformedMessage(f"{what} of {len(buf)} bytes: expected {size}")
+            raise _bad("counts", f"{what} declares {h[8]} values: expected {n_values} "
+                                 f"for {h[6]} joints and {h[7]} F/T sensors")
+        raise _bad("counts", f"{what} of {len(buf)} bytes: expected {size}")
 
 
 def _all_finite(x: np.ndarray) -> bool:
@@ -214,17 +231,20 @@ def encode_command(seq: int, time: float, q_des: np.ndarray) -> bytes:
 
 
 def decode_command(buf: bytes, joint_names: Sequence[str]) -> Command:
-    """Parse and validate a command for a robot with joints ``joint_names``."""
+    """Parse and validate a command for a robot with joints ``joint_names`` (flags 0, counts, finite
+    angles; whether its seq and time match a published frame is the robot's check, hal/robot/gate.py)."""
     h = _unpack(buf, MsgType.COMMAND)
     n = len(joint_names)
+    if h[3] != 0:
+        raise _bad("flags", f"command flags = {h[3]:#06x}: expected 0")
     if h[6] != n or h[7] != 0:
-        raise MalformedMessage(f"command for {h[6]} joints and {h[7]} F/T sensors: expected {n} joints and 0")
+        raise _bad("counts", f"command for {h[6]} joints and {h[7]} F/T sensors: expected {n} joints and 0")
     _check_size(buf, h, n, 0)
     q = np.frombuffer(buf, _F8, n, HEADER_SIZE)
     if not _all_finite(q):
         bad = int(np.flatnonzero(~np.isfinite(q))[0])
-        raise MalformedMessage(f"command answering frame {h[4]}: {_joint(bad, joint_names)} = {q[bad]}: "
-                               "expected a finite angle [rad]")
+        raise _bad("values", f"command answering frame {h[4]}: {_joint(bad, joint_names)} = {q[bad]}: "
+                             "expected a finite angle [rad]")
     return Command(h[4], h[5], q)
 
 

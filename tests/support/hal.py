@@ -13,7 +13,6 @@ from pathlib import Path
 
 from servotau.apps.processes import free_port, stop_process, wait_ready
 from servotau.errors import HalError
-from servotau.hal.robot.firmware import SafetyConfig
 
 __all__ = ["ENV", "controller", "endpoint", "free_port", "robot_server", "robot_status", "stop_process"]
 
@@ -40,17 +39,18 @@ def endpoint(port: int) -> str:
 def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep", log: Path | None = None,
                  max_ticks: int | None = None, hold_after: float | None = None,
                  servo_off_after: float | None = None,
-                 lockstep_hold_after: float = SafetyConfig.lockstep_hold_after,
-                 lockstep_servo_off_after: float = SafetyConfig.lockstep_servo_off_after, timeout: float = 20.0):
+                 lockstep_hold_after: float = 1.0, lockstep_servo_off_after: float | None = None,
+                 safety: dict | None = None, robot_kwargs: dict | None = None, timeout: float = 20.0):
     """A FakeRobot served over Zenoh in a subprocess; killed on exit whatever happens.
 
-    The lock-step watchdog gets the shipped times (config/hal.toml, 1 s / 3 s) unless given: ``python -m
-    servotau.hal`` would otherwise take ``--hold-after`` (50 ms), and a controller descheduled for 50 ms on a
-    loaded machine would make the robot hold in the middle of a lock-step run."""
+    The lock-step watchdog holds after 1 s of wall time unless given (shipped: 50 ms, SafetyConfig): a
+    controller descheduled for 50 ms on a loaded machine would make the robot hold in the middle of a
+    lock-step run, and the tests of determinism assert there is none. ``safety``: more [hal.safety]
+    settings (``--safety``); ``robot_kwargs``: more FakeRobot arguments (e.g. ``encoder_faults``)."""
     ready = tmp / f"ready-{port}"
     args = [sys.executable, "-m", "servotau.hal", "--robot", "servotau.simrobot.fake:FakeRobot",
-            "--kwargs", json.dumps({"seed": seed}), "--listen", endpoint(port), "--clock", clock,
-            "--ready-file", str(ready)]
+            "--kwargs", json.dumps({"seed": seed, **(robot_kwargs or {})}), "--listen", endpoint(port),
+            "--clock", clock, "--ready-file", str(ready)]
     if log is not None:
         args += ["--log", str(log)]
     if max_ticks is not None:
@@ -59,8 +59,11 @@ def robot_server(tmp: Path, port: int, *, seed: int = 0, clock: str = "lockstep"
         args += ["--hold-after", str(hold_after)]
     if servo_off_after is not None:
         args += ["--servo-off-after", str(servo_off_after)]
-    args += ["--lockstep-hold-after", str(lockstep_hold_after),
-             "--lockstep-servo-off-after", str(lockstep_servo_off_after)]
+    args += ["--lockstep-hold-after", str(lockstep_hold_after)]
+    if lockstep_servo_off_after is not None:
+        args += ["--lockstep-servo-off-after", str(lockstep_servo_off_after)]
+    if safety:
+        args += ["--safety", json.dumps(safety)]
     out = open(tmp / f"server-{port}.log", "w")
     p = subprocess.Popen(args, env=ENV, stdout=out, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
     try:

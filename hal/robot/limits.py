@@ -1,0 +1,67 @@
+"""Velocity and acceleration limits of the desired angles the robot side applies (per joint, per tick).
+
+:class:`RateLimiter` keeps the last applied ``q_des`` and its velocity and bounds the next one so that,
+tick to tick in robot time (one period per tick),
+
+- ``|q_des[k] - q_des[k-1]| / period <= max_velocity`` [rad/s] and
+- ``|v[k] - v[k-1]| / period <= max_acceleration`` [rad/s^2],
+
+braking early enough to reach a target without overshooting it (the largest velocity from which a
+constant deceleration ``max_acceleration`` still stops within the remaining distance). The firmware
+applies the bounded value ("clamp") or holds when it differs from the command ("trip").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_TOL = 1e-9  # [rad] a bounded value this close to the target is the target (float rounding)
+
+
+class RateLimiter:
+    """Bounds the velocity and acceleration of successive desired angles (arrays in RobotInfo order)."""
+
+    def __init__(self, max_velocity: np.ndarray, max_acceleration: np.ndarray, period: float):
+        self.v_max = np.asarray(max_velocity, dtype=float)  # [rad/s]
+        self.a_max = np.asarray(max_acceleration, dtype=float)  # [rad/s^2]
+        self.dt = float(period)  # [s]
+        self._q: np.ndarray | None = None  # last applied q_des [rad]
+        self._v = np.zeros_like(self.v_max)  # its velocity [rad/s]
+
+    @property
+    def q(self) -> np.ndarray | None:
+        """The last applied q_des [rad] (None before the first)."""
+        return self._q
+
+    def reset(self, q: np.ndarray) -> None:
+        """Start again from ``q`` [rad] at rest (a hold, or before the first command)."""
+        self._q = np.array(q, dtype=float)
+        self._v = np.zeros_like(self.v_max)
+
+    def bound(self, target: np.ndarray) -> np.ndarray:
+        """The desired angles closest to ``target`` [rad] within the limits (not yet applied; call
+        :meth:`reset` first)."""
+        dt, a = self.dt, self.a_max
+        e = target - self._q
+        # Braking from v (this tick's step) by a * dt per tick covers dt * ((m + 1) v - a dt m (m + 1) / 2),
+        # m = floor(v / (a dt)); the largest v that stops within |e|: m from the continuous bound
+        # m (m + 1) / 2 <= |e| / (a dt^2), then v solved for that m.
+        dist = np.abs(e)
+        m = np.floor(np.sqrt(0.25 + 2.0 * dist / (a * dt * dt)) - 0.5)
+        v_brake = (dist / dt + a * dt * m * (m + 1) / 2) / (m + 1)
+        speed = np.minimum(np.minimum(dist / dt, v_brake), self.v_max)
+        v = np.clip(np.sign(e) * speed, self._v - a * dt, self._v + a * dt)
+        v = np.clip(v, -self.v_max, self.v_max)
+        out = self._q + v * dt
+        near = np.abs(out - target) <= _TOL
+        out[near] = target[near]
+        return out
+
+    def applied(self, q_des: np.ndarray) -> None:
+        """``q_des`` [rad] was applied this tick."""
+        self._v = (q_des - self._q) / self.dt
+        self._q = np.array(q_des, dtype=float)
+
+    def exceeds(self, target: np.ndarray) -> np.ndarray:
+        """Joints on which ``target`` breaks a limit (boolean mask)."""
+        return np.abs(self.bound(target) - target) > _TOL
