@@ -16,11 +16,11 @@ Columns (float64 unless said otherwise)::
 so a crash loses at most the last chunk; :meth:`LogWriter.close` merges the chunks into ``<path>``.
 :func:`read_log` also reads an unclosed log from its chunks.
 
-:meth:`LogWriter.append` never waits for the disk: full chunks go to a writer thread through a bounded
-queue of ``max_pending`` chunks; a chunk that finds the queue full (the disk or the writer thread is
-too slow) is dropped, counted in :attr:`LogWriter.dropped_rows` and reported when the log is closed.
-A control loop calling ``append`` every tick so never stalls on the log; the log then misses rows
-(their ``seq`` values are absent) instead.
+Full chunks go to a writer thread through a bounded queue of ``max_pending`` chunks. A chunk that finds the
+queue full (the disk or the writer thread is too slow) waits for room, so nothing is lost; with
+``realtime=True`` (a loop on the wall clock) it is dropped instead, counted in :attr:`LogWriter.dropped_rows`
+and reported when the log is closed: such a loop never stalls on the log, which then misses rows (their
+``seq`` values are absent). A lock-step or offline run keeps every row.
 """
 
 from __future__ import annotations
@@ -118,8 +118,9 @@ class LogWriter:
         chunk_rows: rows per chunk; a crash loses at most the last chunk (and the one being written).
         metadata: extra key -> value strings stored in the schema metadata (scenario, seed...).
         background: write the chunks in a background thread (the control loop never waits for the disk).
-        max_pending: chunks waiting for the background writer at most; a chunk beyond is dropped and
-            counted (:attr:`dropped_rows`), never waited for.
+        max_pending: chunks waiting for the background writer at most; a chunk beyond waits for room, or with
+            ``realtime`` is dropped and counted (:attr:`dropped_rows`).
+        realtime: the caller's loop runs on the wall clock: never wait for the writer (drop instead).
     """
 
     def __init__(
@@ -133,6 +134,7 @@ class LogWriter:
         metadata: Mapping[str, str] | None = None,
         background: bool = True,
         max_pending: int = 8,
+        realtime: bool = False,
     ):
         self.path = Path(path)
         self.info = info
@@ -151,6 +153,7 @@ class LogWriter:
         self.rows = 0  # rows appended in total
         self.dropped_rows = 0  # rows of the chunks dropped because the writer queue was full
         self.dropped_chunks = 0
+        self.realtime = bool(realtime)
         self.closed = False
         _open_writers.add(self)
         self._error: BaseException | None = None  # of the background writer, raised by append/close
@@ -302,7 +305,7 @@ class LogWriter:
 
     def flush(self) -> None:
         """Hand the buffered rows over as one complete Parquet chunk (atomic rename); with a background writer
-        whose queue is full, drop them instead (counted in :attr:`dropped_rows`): never wait."""
+        whose queue is full, wait for room, or with ``realtime`` drop them (counted in :attr:`dropped_rows`)."""
         if self._n == 0 or self.schema is None:
             return
         n = self._n
@@ -319,7 +322,7 @@ class LogWriter:
                                             daemon=True)
             self._thread.start()
         try:
-            self._queue.put_nowait(job)
+            self._queue.put(job, block=not self.realtime)
         except queue.Full:  # the writer is behind: keep the loop going, lose these rows (reused buffers)
             self.dropped_rows += n
             self.dropped_chunks += 1

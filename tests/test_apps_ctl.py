@@ -88,15 +88,21 @@ def test_ctl_status_reset_release_over_zenoh(served, capsys):
     assert "reset refused: the trip condition still holds" in err
 
 
-def test_ctl_without_an_answer_is_a_clear_error(tmp_path, capsys):
-    """Nobody serves the robot-side operator query (or no controller runs): exit code 2 naming the key."""
+def test_ctl_without_an_answer_is_a_clear_error_and_the_robot_answers_its_own_reset(tmp_path, capsys):
+    """No controller runs: ``ctl reset`` exits 2 naming the controller's key; ``--robot-side`` is answered by the
+    robot process itself (hal/robot/operator.py) with its firmware state."""
     port = free_port()
     with robot_server(tmp_path, port):
-        args = build_parser("ctl").parse_args(["ctl", "reset", "--robot-side", "--robot", "fake", "--port", str(port),
+        args = build_parser("ctl").parse_args(["ctl", "reset", "--robot", "fake", "--port", str(port),
                                                "--timeout", "0.3"])
         assert ctl.main(args) == 2
-    err = capsys.readouterr().err
-    assert 'no robot of robot "fake" answered servotau/v1/fake/operator within 0.3 s' in err
+        err = capsys.readouterr().err
+        assert 'no controller of robot "fake" answered servotau/v1/fake/controller/operator within 0.3 s' in err
+        args = build_parser("ctl").parse_args(["ctl", "reset", "--robot-side", "--robot", "fake", "--port", str(port),
+                                               "--timeout", "5"])
+        code = ctl.main(args)
+    out = capsys.readouterr().out
+    assert code in (0, 1) and '"state": "WAITING"' in out, out
 
 
 def test_the_exit_waits_for_the_threads_the_command_started():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -13,9 +14,10 @@ from servotau.hal import LogReader, LogWriter
 from servotau.simrobot.fake import FakeRobot
 
 
-def test_a_stalled_writer_never_blocks_append_and_overflow_is_counted(tmp_path, monkeypatch, caplog):
-    """While the writer thread is stuck on the disk, append() keeps returning: up to max_pending chunks queue, the
-    next ones are dropped and counted; once the disk is back, close() writes the queued chunks and reports the loss."""
+def test_a_stalled_writer_never_blocks_a_realtime_append_and_overflow_is_counted(tmp_path, monkeypatch, caplog):
+    """realtime=True: while the writer thread is stuck on the disk, append() keeps returning: up to max_pending chunks
+    queue, the next ones are dropped and counted; once the disk is back, close() writes the queued chunks and reports
+    the loss."""
     robot = FakeRobot(seed=1)
     path = tmp_path / "slow.parquet"
     stalled, release, writing = threading.Event(), threading.Event(), threading.Event()
@@ -29,7 +31,7 @@ def test_a_stalled_writer_never_blocks_append_and_overflow_is_counted(tmp_path, 
         original(self, job)
 
     monkeypatch.setattr(LogWriter, "_write_chunk", slow_disk)
-    w = LogWriter(path, robot.info, truth=False, extra=[], chunk_rows=10, max_pending=2)
+    w = LogWriter(path, robot.info, truth=False, extra=[], chunk_rows=10, max_pending=2, realtime=True)
     frames = [robot.read()]
     for _ in range(99):
         robot.step(frames[-1].q)
@@ -54,6 +56,30 @@ def test_a_stalled_writer_never_blocks_append_and_overflow_is_counted(tmp_path, 
     assert "70 of 100 rows dropped in 7 chunks" in caplog.text
     seq = LogReader(path).columns["seq"]
     np.testing.assert_array_equal(seq, [f.seq for f in frames[:30]])  # the written chunks, whole and in order
+
+
+def test_a_slow_writer_makes_a_lockstep_append_wait_and_loses_nothing(tmp_path, monkeypatch):
+    """realtime=False (lock-step, offline): a chunk that finds the queue full waits for the writer; every row is in
+    the log."""
+    robot = FakeRobot(seed=2)
+    original = LogWriter._write_chunk
+
+    def slow_disk(self, job):
+        time.sleep(0.02)
+        original(self, job)
+
+    monkeypatch.setattr(LogWriter, "_write_chunk", slow_disk)
+    path = tmp_path / "lockstep.parquet"
+    with LogWriter(path, robot.info, truth=False, extra=[], chunk_rows=10, max_pending=1) as w:
+        f = robot.read()
+        seqs = []
+        for _ in range(200):
+            w.append(f, f.q)
+            seqs.append(f.seq)
+            robot.step(f.q)
+            f = robot.read()
+    assert w.dropped_rows == 0
+    np.testing.assert_array_equal(LogReader(path).columns["seq"], seqs)
 
 
 def test_max_pending_is_validated(tmp_path):

@@ -71,7 +71,8 @@ def _command(seq: int, t: float, q: np.ndarray, flags: int = 0) -> bytes:
 
 
 def test_realtime_rejects_replays_old_commands_and_bad_headers(tmp_path):
-    """Realtime: one command applied, then 100 copies of it (rejected as replays, never re-arming the watchdog),
+    """Realtime: one command applied, then 100 copies of it with the claim's token (as a peer that read it off the
+    command key would send them: rejected as replays, never re-arming the watchdog),
     a command answering a frame older than max_command_age_ticks, a wrong time field and flags 0xFFFF: each
     rejected with its reason; the robot holds after hold_after as if the copies had never come."""
     port = free_port()
@@ -85,13 +86,14 @@ def test_realtime_rejects_replays_old_commands_and_bad_headers(tmp_path):
                 old = b.read()  # answered below, once older than max_command_age_ticks
                 st = robot_status(port, lambda st: st["commands_accepted"] == 1)
                 q = np.array(f.q)
+                token = b._token
                 for _ in range(100):
-                    pub.put(encode_command(f.seq, f.time, q))
+                    pub.put(encode_command(f.seq, f.time, q), attachment=token)
                 robot_status(port, lambda st: st["seq"] > old.seq + 200)
                 g = b.read()
-                pub.put(encode_command(old.seq, old.time, q))  # > 200 ticks old by now
-                pub.put(_command(g.seq, g.time + 0.5, q))
-                pub.put(_command(g.seq, g.time, q, flags=0xFFFF))
+                pub.put(encode_command(old.seq, old.time, q), attachment=token)  # > 200 ticks old by now
+                pub.put(_command(g.seq, g.time + 0.5, q), attachment=token)
+                pub.put(_command(g.seq, g.time, q, flags=0xFFFF), attachment=token)
                 st = robot_status(port, lambda st: st["commands_rejected"] >= 103 and st["state"] == "HOLDING")
         finally:
             s.close()

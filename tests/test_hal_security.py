@@ -175,7 +175,8 @@ def test_a_latched_servo_off_is_reported_at_connect():
     """A robot whose servos are off (latched) tells the next controller how to reset it, instead of a trip."""
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    with serving(ServerConfig(listen=(ep,), safety=SafetyConfig())) as server:
+    no_rate_limit = SafetyConfig(max_velocity=1e6, max_acceleration=1e9)  # the 1 rad step reaches the servos
+    with serving(ServerConfig(listen=(ep,), safety=no_rate_limit)) as server:
         with ZenohBackend("fake", connect=[ep], frame_timeout=TIMEOUT) as b:
             f = b.read()
             b.write(dict(zip(b.info.joint_names, np.asarray(f.q) + 1.0, strict=True)))  # > max_position_error

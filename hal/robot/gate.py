@@ -19,7 +19,8 @@ import numpy as np
 
 HISTORY = 4096  # frames whose time is remembered (> any max_command_age_ticks)
 
-REJECT_REASONS = ("header", "version", "flags", "counts", "values", "future", "time", "replay", "too_old")
+REJECT_REASONS = ("header", "version", "flags", "counts", "values", "not_claimer", "future", "time", "replay",
+                  "too_old")
 """Counted reasons of a rejected command: the first five from decoding (hal/wire/protocol.py), the others
 from :class:`CommandGate`."""
 

@@ -113,6 +113,9 @@ class RobotServer:
                 self.firmware.reject(reject_reason(exc), str(exc))
             return
         with self._cond:
+            if not self.claims.allows(sample.attachment.to_bytes() if sample.attachment is not None else None):
+                self.firmware.reject("not_claimer", "without the token of the claim (hal/robot/claim.py)")
+                return
             verdict, why = self.gate.check(seq, t_cmd)  # docs/protocol.md "Validation"
             if verdict not in (TAKE, STALE):
                 self.firmware.reject(verdict, why)
@@ -122,8 +125,6 @@ class RobotServer:
                 self._n_rtt += 1
             if not self._serving:
                 return
-            if not self.claims.allows(sample.attachment.to_bytes() if sample.attachment is not None else None):
-                return  # not from the controller holding the claim: rejected, counted
             if verdict == STALE:
                 self.firmware.stale()
             elif not self.lockstep:  # real time: the newest command wins, applied at the end of the tick
@@ -250,7 +251,8 @@ class RobotServer:
             self._open()
             if cfg.log:
                 self._log = LogWriter(cfg.log, self.info, truth=True, extra=LOG_EXTRA,
-                                      metadata={"servotau.source": "server", "servotau.clock": cfg.clock})
+                                      metadata={"servotau.source": "server", "servotau.clock": cfg.clock},
+                                      realtime=not self.lockstep)
             with self._cond:
                 self._frame = checked_frame(self.robot.read())
                 self._serving = True

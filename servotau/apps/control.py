@@ -231,6 +231,15 @@ def quiesce_threads(before: set[int] = frozenset(), timeout: float = EXIT_JOIN_T
     return left
 
 
+def _on_wall_clock(backend) -> bool:
+    """The robot paces the loop on the wall clock (its status says so): the log must never make the loop wait
+    (a lock-step robot waits for the controller, so its log keeps every row)."""
+    try:
+        return backend.status().get("clock", "lockstep") != "lockstep"
+    except HalError:
+        return False
+
+
 def main(args) -> int:
     from servotau.hal.log import LogWriter
     from servotau.hal.registry import open_backend, overrides_from_args
@@ -251,7 +260,8 @@ def main(args) -> int:
             hint += f"; releasing by itself after {args.hold_timeout:g} s"
         rec = open_recording(args.rerun)
         stream = RerunStream(rec, backend.info.joint_names, backend.info.model_path) if rec is not None else None
-        writer = LogWriter(args.log, backend.info, metadata={"mode": args.mode}) if args.log else None
+        writer = LogWriter(args.log, backend.info, metadata={"mode": args.mode},
+                           realtime=_on_wall_clock(backend)) if args.log else None
         result = run_session(backend, mode=args.mode, duration=args.duration, stream=stream, writer=writer,
                              operator=operator, hold_timeout=args.hold_timeout, hint=hint, trip_at=args.trip_at)
     except HalError as exc:
