@@ -57,7 +57,7 @@ class ZenohConfig:
     listen: tuple[str, ...] = setting(())
     mode: str = setting("peer", choices=("peer", "client"))
     connect_timeout: float = setting(10.0, unit="s", min=0, strict_min=True)  # wait for the robot process
-    frame_timeout: float = setting(0.1, unit="s", min=0, strict_min=True)  # no frame for this long: HalTimeoutError
+    frame_timeout: float = setting(1.0, unit="s", min=0, strict_min=True)  # no frame for this long: HalTimeoutError
     truth: bool = setting(True)  # receive the simulator's ground truth (evaluation)
     realtime_priority: int = setting(0, min=0, max=99)  # SCHED_FIFO priority of the loop and zenoh's threads
     security: Security = field(default_factory=Security)  # TLS and authentication (hal/wire/security.py)

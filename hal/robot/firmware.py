@@ -9,8 +9,8 @@ the servos, or ``None`` once the servos are cut. States (``FLAG_*`` in every fra
   ``max_velocity`` / ``max_acceleration`` of ``q_des`` (``limit_action = "clamp"``: the bounded value is
   applied, FLAG_RATE_LIMITED; ``"trip"``: HOLDING).
 - HOLDING: hold a position, indefinitely while the encoders are valid, entered when
-  no fresh command came for ``hold_after`` [s] (``lockstep_hold_after`` in lock-step) or the controller's
-  liveliness token vanished (``hold_reason``), a command broke a rate limit with ``limit_action = "trip"``,
+  no fresh command came for ``hold_after`` [s] (``lockstep_hold_after`` in lock-step) or the claim ended
+  (the claimer's session closed or it released: ``hold_reason``), a command broke a rate limit with ``limit_action = "trip"``,
   or the encoders went invalid or stale (FLAG_SENSOR_FAULT: hold their last valid reading, per joint; commands
   are not applied). A fresh command resumes RUNNING (once the encoders are valid again). In lock-step the
   server holds for a hung controller without stepping (:meth:`watchdog`; simulated time stands still).
@@ -163,7 +163,7 @@ class Firmware:
         self.counters["commands_stale"] += 1
 
     def controller_lost(self) -> None:
-        """The controller's liveliness token vanished: hold at the next tick without waiting."""
+        """The claim ended (the claimer's session closed, or it released): hold at the next tick without waiting."""
         if self.state == FirmwareState.RUNNING:
             self._hold_requested = True
 
