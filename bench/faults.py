@@ -391,6 +391,7 @@ def _trip_run(tmp: Path, clock: str, trip_at: float = 0.5, window: float = 10.0,
     t_trip = float(cc["t"][0]) + SETTLE + trip_at
     r = {"clock": clock, "controller_exit_code": code, "trip_robot_time_s": t_trip,
          "drop_mrad": _motion_mrad(c, names, t_trip, t_trip + window),
+         "drift_after_100ms_mrad": _motion_mrad(c, names, t_trip + 0.1, t_trip + window),
          "after_exit_mrad": _motion_mrad(c, names, t_exit, t_exit + after_exit),
          "servo_off_ticks": int((c["hal/state"] == 3.0).sum())}
     progress(f"trip: {r}")
