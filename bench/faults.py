@@ -137,6 +137,7 @@ def _takeover_run(tmp: Path, ticks: int, tls: Path | None) -> dict:
                if r and (int(s) not in sent or np.abs(row - sent[int(s)]).max() > 1e-9)]
     return {"applied": len(foreign), "attacker_puts": puts[0], "controller_commands": len(sent),
             "reached_robot_not_claimer": st["commands_not_claimer"], "commands_accepted": st["commands_accepted"],
+            "robot_rejected": st["rejected"], "robot_stale": st["commands_stale"],
             "claim_attempt": claim}
 
 
@@ -419,7 +420,8 @@ def bench_load(tmp: Path, runs: int, hal: Path | None, busy: int = 4) -> dict:
                 finally:
                     kill_group(ctl)
             out = (tmp / f"load-{i}-{port}.out").read_text().splitlines()
-            first = next((line for line in out if "frames skipped" in line), out[-1] if out else "")
+            first = next((line for line in out if " ticks, " in line and "frames skipped in" in line),
+                         out[-1] if out else "")
             results.append({"exit_code": code, "summary": first[:300],
                             "loadavg_1min": os.getloadavg()[0]})
             progress(f"load run {i}: exit {code}: {first[:200]}")
