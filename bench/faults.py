@@ -414,7 +414,7 @@ def bench_load(tmp: Path, runs: int, hal: Path | None, busy: int = 4) -> dict:
         time.sleep(1.0)
         for i in range(runs):
             with sim_process(tmp, clock="realtime") as (_, port):
-                ctl = control_process(tmp, port, "--mode", "torque", tag=f"load-{i}", hal=hal)
+                ctl = control_process(tmp, port, "--mode", "torque", "--hold-timeout", "1", tag=f"load-{i}", hal=hal)
                 try:
                     code = ctl.wait(180)
                 finally:
@@ -422,7 +422,8 @@ def bench_load(tmp: Path, runs: int, hal: Path | None, busy: int = 4) -> dict:
             out = (tmp / f"load-{i}-{port}.out").read_text().splitlines()
             first = next((line for line in out if " ticks, " in line and "frames skipped in" in line),
                          out[-1] if out else "")
-            results.append({"exit_code": code, "summary": first[:300],
+            trip = next((line for line in out if line.startswith("SAFETY TRIP")), None)
+            results.append({"exit_code": code, "summary": first[:300], "trip": trip and trip[:200],
                             "loadavg_1min": os.getloadavg()[0]})
             progress(f"load run {i}: exit {code}: {first[:200]}")
     finally:
@@ -451,6 +452,7 @@ def main() -> int:
     p.add_argument("--runs", type=int, help="hold-latency runs per clock and fault (default 5; quick 1)")
     p.add_argument("--load-runs", type=int, help="realtime torque runs under load (default 5; quick 1)")
     p.add_argument("--load-hal", help="hal.toml of the controller in the load runs (default: config/hal.toml)")
+    p.add_argument("--keep", help="write the logs and process outputs to this directory (default: a temporary one)")
     p.add_argument("--no-tls", action="store_true", help="skip the TLS + access-control takeover run")
     a = p.parse_args()
     parts = [x for x in a.only.split(",") if x]
@@ -463,8 +465,10 @@ def main() -> int:
               "load_hal": a.load_hal or "config/hal.toml"}
     out: dict = {}
     t0 = time.perf_counter()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the finally blocks stop every child
     with tempfile.TemporaryDirectory(prefix="servotau-faults-") as tmp_name:
-        tmp = Path(tmp_name)
+        tmp = Path(a.keep or tmp_name)
+        tmp.mkdir(parents=True, exist_ok=True)
         steps = {"takeover": lambda: bench_takeover(tmp, config["takeover_ticks"], config["tls"]),
                  "fuzz": lambda: bench_fuzz(tmp, config["fuzz"]),
                  "stale": lambda: bench_stale(tmp, 20 if q else 500, 100),
