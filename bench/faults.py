@@ -43,6 +43,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -389,7 +390,9 @@ def _trip_run(tmp: Path, clock: str, trip_at: float = 0.5, window: float = 10.0,
     names = [n for n in read_log(rlog)[0].joint_names]
     _, c = read_log(rlog)
     _, cc = read_log(clog)
-    t_trip = float(cc["t"][0]) + SETTLE + trip_at
+    text = (tmp / f"trip-{clock}-{port}.out").read_text()
+    said = re.search(r"safety trip \[command_error\].* at t = ([0-9.]+) s", text)
+    t_trip = float(said.group(1)) if said else float(cc["t"][0]) + SETTLE + trip_at  # as the controller reports it
     r = {"clock": clock, "controller_exit_code": code, "trip_robot_time_s": t_trip,
          "drop_mrad": _motion_mrad(c, names, t_trip, t_trip + window),
          "drift_after_100ms_mrad": _motion_mrad(c, names, t_trip + 0.1, t_trip + window),
