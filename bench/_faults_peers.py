@@ -112,6 +112,18 @@ def sim_process(tmp: Path, *, clock: str = "lockstep", log: Path | None = None, 
         kill_group(p)
 
 
+def sim_config_with_faults(tmp: Path, start: float, duration: float) -> Path:
+    """A copy of config/sim.toml whose sensors file has NaN encoders from ``start`` for ``duration`` [s]."""
+    cfg = ROOT / "config"
+    sensors = tmp / f"sensors-nan-{start}-{duration}.toml"
+    sensors.write_text((cfg / "sensors.toml").read_text()
+                       + f'\n[[faults]]\nsensor = "encoders"\nkind = "nan"\nstart = {start}\nduration = {duration}\n')
+    sim = tmp / f"sim-nan-{start}-{duration}.toml"
+    sim.write_text(f'scenario = "{cfg / "scenarios" / "hanging.toml"}"\nservo = "{cfg / "servo.toml"}"\n'
+                   f'sensors = "{sensors}"\nseed = 0\n')
+    return sim
+
+
 def control_process(tmp: Path, port: int, *extra: str, tag: str = "control", hal: Path | None = None) \
         -> subprocess.Popen:
     """``servotau control --port PORT`` (its output in ``tmp/<tag>-<port>.out``)."""
@@ -291,4 +303,5 @@ def over_limit(q_des: np.ndarray, state: np.ndarray, period: float, v_max: float
 
 
 __all__ = ["FLAG_HOLDING", "FLAG_SERVO_OFF", "FLAG_WAITING", "Peer", "control_process", "kill_group",
-           "malformed_commands", "over_limit", "progress", "robot_process", "sim_process", "spawn", "wait_status"]
+           "malformed_commands", "over_limit", "progress", "robot_process", "sim_config_with_faults",
+           "sim_process", "spawn", "wait_status"]

@@ -69,6 +69,7 @@ from _faults_peers import (  # noqa: E402
     over_limit,
     progress,
     robot_process,
+    sim_config_with_faults,
     sim_process,
     spawn,
     wait_status,
@@ -275,21 +276,9 @@ def bench_creep(tmp: Path, ticks: int) -> dict:
 
 # ---------------------------------------------------------------------------------------------- NaN encoders
 
-def _sim_config_with_faults(tmp: Path, start: float, duration: float) -> Path:
-    """A copy of config/sim.toml whose sensors file has NaN encoders from ``start`` for ``duration`` [s]."""
-    cfg = ROOT / "config"
-    sensors = tmp / f"sensors-nan-{start}-{duration}.toml"
-    sensors.write_text((cfg / "sensors.toml").read_text()
-                       + f'\n[[faults]]\nsensor = "encoders"\nkind = "nan"\nstart = {start}\nduration = {duration}\n')
-    sim = tmp / f"sim-nan-{start}-{duration}.toml"
-    sim.write_text(f'scenario = "{cfg / "scenarios" / "hanging.toml"}"\nservo = "{cfg / "servo.toml"}"\n'
-                   f'sensors = "{sensors}"\nseed = 0\n')
-    return sim
-
-
 def _nan_run(tmp: Path, clock: str, duration: float) -> dict:
     start = 1.0 if clock == "lockstep" else 4.0  # [s] robot time: the controller runs by then
-    config = _sim_config_with_faults(tmp, start, duration)
+    config = sim_config_with_faults(tmp, start, duration)
     with sim_process(tmp, clock=clock, config=config) as (sim, port):
         ctl = control_process(tmp, port, "--duration", "10", "--hold-timeout", "30", tag=f"nan-{clock}-{duration}")
         obs = Peer("hrp2", f"tcp/127.0.0.1:{port}")
