@@ -27,7 +27,8 @@ its own session, like any program on the network). Figures (target in ``targets`
   servo off, latched) under ``servotau control``: 1 if the robot process stays up and keeps publishing.
 - ``hold_latency_kill_ms_max`` / ``hold_latency_hang_ms_max``: ``servotau sim`` + ``servotau control``, both
   clocks, ``--runs`` each: from the controller's SIGKILL / SIGSTOP to the first frame flagged HOLDING, wall
-  time, seen by an observer peer subscribing to frames. Targets 20 and 50 ms.
+  time, seen by an observer peer subscribing to frames. Targets 20 and 50 ms. ``killed_controller_exit_ms``: from
+  the SIGKILL to the process's exit as its parent sees it (its sockets close, and zenoh can see it, only then).
 - ``trip_drop_mrad_max``: ``servotau control --trip-at 0.5 --hold-timeout 12`` on ``servotau sim`` (both clocks):
   the largest joint motion (encoders, robot log) in the 10 s of robot time after the controller's trip, and,
   reported apart, in the 5 s after the controller's exit (the robot holding alone). Target 10 mrad.
@@ -49,6 +50,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -307,8 +309,9 @@ def bench_nan(tmp: Path, quick: bool) -> dict:
 _MOVING = FLAG_WAITING | FLAG_HOLDING | FLAG_SERVO_OFF
 
 
-def _hold_once(tmp: Path, obs: Peer, port: int, clock: str, kind: str, i: int, rng) -> float | None:
-    """Start ``servotau control``, let it run, SIGKILL or SIGSTOP it; wall ms to the first HOLDING frame."""
+def _hold_once(tmp: Path, obs: Peer, port: int, clock: str, kind: str, i: int, rng, gone: list) -> float | None:
+    """Start ``servotau control``, let it run, SIGKILL or SIGSTOP it; wall ms to the first HOLDING frame (and, for
+    a kill, appended to ``gone``: wall ms to the process's exit as its parent sees it)."""
     wait_status(obs, lambda s: s["claim_holder"] is None, timeout=10.0)
     seq0 = obs.newest[0] if obs.newest else -1
     ctl = control_process(tmp, port, "--duration", "20", tag=f"hold-{clock}-{kind}-{i}")
@@ -321,6 +324,9 @@ def _hold_once(tmp: Path, obs: Peer, port: int, clock: str, kind: str, i: int, r
         t0 = time.monotonic()
         obs.watch(FLAG_HOLDING, t0)
         os.kill(ctl.pid, signal.SIGKILL if kind == "kill" else signal.SIGSTOP)
+        if kind == "kill":  # when the killed process is gone (its sockets closed): zenoh can see it only then
+            threading.Thread(target=lambda: (ctl.wait(), gone.append((time.monotonic() - t0) * 1e3)),
+                             daemon=True).start()
         obs.wait(lambda p: p.watch_hit is not None, 5.0)
         return None if obs.watch_hit is None else (obs.watch_hit - t0) * 1e3
     finally:
@@ -330,6 +336,7 @@ def _hold_once(tmp: Path, obs: Peer, port: int, clock: str, kind: str, i: int, r
 def bench_hold(tmp: Path, runs: int) -> dict:
     rng = np.random.default_rng(3)
     lat: dict[str, list] = {}
+    gone: list[float] = []
     for clock in ("lockstep", "realtime"):
         with sim_process(tmp, clock=clock) as (_, port):
             obs = Peer("hrp2", f"tcp/127.0.0.1:{port}")
@@ -337,7 +344,7 @@ def bench_hold(tmp: Path, runs: int) -> dict:
                 obs.wait(lambda p: p.newest is not None, 10.0)
                 for i in range(runs):
                     for kind in ("kill", "hang"):
-                        ms = _hold_once(tmp, obs, port, clock, kind, i, rng)
+                        ms = _hold_once(tmp, obs, port, clock, kind, i, rng, gone)
                         lat.setdefault(f"{kind}_{clock}", []).append(ms)
                         progress(f"hold {clock} {kind} {i}: {ms} ms")
             finally:
@@ -347,8 +354,10 @@ def bench_hold(tmp: Path, runs: int) -> dict:
         xs = [x for k, v in lat.items() if k.startswith(kind) for x in v]
         return None if not xs or None in xs else max(xs)
 
+    kills = lat.get("kill_lockstep", []) + lat.get("kill_realtime", [])  # in the order of ``gone``
     return {"hold_latency_kill_ms_max": worst("kill"), "hold_latency_hang_ms_max": worst("hang"),
-            "hold_latency_ms": lat, "hold_runs_per_clock": runs}
+            "hold_latency_ms": lat, "hold_runs_per_clock": runs, "killed_controller_exit_ms": gone,
+            "kill_hold_after_exit_ms": [h - g for h, g in zip(kills, gone, strict=False) if h is not None]}
 
 
 # ---------------------------------------------------------------------------------------------- trip
