@@ -25,6 +25,7 @@ def test_quick_fuzz_and_takeover_apply_nothing():
     assert r["fuzz_applied"] == 0 and r["met"]["fuzz_applied"] is True
     assert d["fuzz_valid_command_then_applied"] == 1  # the channel works: a valid command is applied
     run = d["takeover_runs"]["loopback"]
-    assert run["claim_attempt"].startswith("refused") and run["reached_robot_not_claimer"] > 0
+    reached = run["reached_robot_not_claimer"] + sum(run["robot_rejected"].values()) + run["robot_stale"]
+    assert run["claim_attempt"].startswith("refused") and run["attacker_puts"] > 0 and reached > 0
     assert r["takeover_commands_applied"] == 0 and run["commands_accepted"] == run["controller_commands"]
     assert r["stale_replayed_applied"] is None and r["met"]["hold_latency_kill_ms_max"] is None  # not run
