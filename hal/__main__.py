@@ -2,6 +2,6 @@
 
 import sys
 
-from .robot.server import main
+from .robot.cli import main
 
 sys.exit(main())

@@ -66,6 +66,25 @@ def test_nan_encoders_keep_the_robot_process_up_and_reset_turns_it_back_on(tmp_p
     assert st2["state"] == "RUNNING" and st2["trip_reason"].startswith("encoders invalid"), st2
 
 
+def test_a_reset_ends_the_claim_of_a_controller_still_running(tmp_path):
+    """A robot latched SERVO_OFF by a 1 rad step (rate limits lifted so that it reaches the servos) is reset while
+    its controller still runs and keeps sending that step: the reset ends the claim, so the step is rejected
+    (not from the claimer) and the robot stays WAITING at its measured posture until a new claim."""
+    port = free_port()
+    with robot_server(tmp_path, port, safety={"max_velocity": 1e6, "max_acceleration": 1e9}) as server:
+        with ZenohBackend("fake", connect=[endpoint(port)], frame_timeout=FRAME_TIMEOUT) as b:
+            step = np.asarray(b.read().q) + 1.0
+            b.write_array(step)
+            robot_status(port, lambda st: st["state"] == "SERVO_OFF")
+            answer = operator(port, {"action": "reset"})
+            b.write_array(step)  # answers the frame it last read, as a controller unaware of the reset does
+            st = robot_status(port, lambda st: st["commands_not_claimer"] >= 1)
+        assert server.poll() is None
+    assert answer["ok"] is True and answer["state"] == "WAITING", answer
+    assert st["state"] == "WAITING" and st["claim_holder"] is None and st["commands_not_claimer"] == 1, st
+    assert st["commands_accepted"] == 1, st
+
+
 def _command(seq: int, t: float, q: np.ndarray, flags: int = 0) -> bytes:
     return HEADER.pack(MAGIC, PROTOCOL_VERSION, MsgType.COMMAND, flags, seq, t, q.size, 0, q.size) + q.tobytes()
 

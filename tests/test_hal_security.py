@@ -66,11 +66,15 @@ def _wait(predicate) -> None:
         time.sleep(0.01)
 
 
-def _raw_commands(session: Session, n: int, *, attachment: bytes | None = None) -> None:
-    """``n`` well-formed commands answering frame 0, put by a session that holds no claim."""
+def _raw_commands(session: Session, n: int, *, attachment: bytes | None = None, matched: bool = True) -> None:
+    """``n`` well-formed commands answering frame 0, put by a session that holds no claim, once its publisher
+    matches the robot's subscriber (``matched=False``: access control may hide it; then after 0.2 s)."""
     q = FakeRobot(seed=0).read().q + 0.05
     pub = session.keep(session.z.declare_publisher(keys("fake").command))
-    time.sleep(0.2)  # let the publisher find the robot's subscriber (if zenoh lets it)
+    if matched:
+        _wait(lambda: pub.matching_status.matching)
+    else:
+        time.sleep(0.2)
     for _ in range(n):
         pub.put(encode_command(0, 0.0, q), attachment=attachment)
 
@@ -88,7 +92,7 @@ def test_tls_and_access_control_only_the_controller_identity_drives(certs):
         try:
             frames = viewer.z.declare_subscriber(keys("fake").frame)
             _wait(lambda: frames.try_recv() is not None or server.status()["ticks"] > 0)
-            _raw_commands(viewer, 50)
+            _raw_commands(viewer, 50, matched=False)
             claim = list(viewer.z.get(f"{keys('fake').prefix}/claim", payload=b'{"op": "claim", "zid": "1"}',
                                       timeout=1.0))
             status = json.loads(next(iter(viewer.z.get(keys("fake").status, timeout=2.0))).ok.payload.to_bytes())
@@ -118,6 +122,21 @@ def test_a_peer_without_a_certificate_cannot_connect(certs):
     with serving(ServerConfig(listen=(ep,), security=Security(tls=_tls(certs.robot, certs), access=roles))):
         with pytest.raises(HalError, match="no robot"):
             ZenohBackend("fake", connect=[f"tcp/127.0.0.1:{port}"], connect_timeout=0.5)
+
+
+def test_a_claim_naming_the_holders_zid_gets_no_token():
+    """The holder's zid is no secret (a refusal names the holder): a second claim naming it is refused like any
+    other, and the claim's token is never handed out again."""
+    from servotau.hal.robot.claim import ClaimTable, claim_request
+
+    table, zid = ClaimTable(), "a1b2c3d4e5f60718"
+    links = {zid: None, "99887766554433aa": None}
+    first, event = table.handle(claim_request(zid, "ctl", 1, "op"), links, set(), 0.0)
+    token = json.loads(first)["token"]
+    again, event2 = table.handle(claim_request(zid, "thief", 2, "x"), links, set(), 1.0)
+    reply = json.loads(again)
+    assert event == "granted" and event2 is None and reply["granted"] is False and "token" not in reply
+    assert table.token.hex() == token and table.claims_refused == 1
 
 
 def test_second_claim_is_refused_and_unclaimed_commands_are_not_applied():
@@ -282,7 +301,7 @@ def test_controller_side_config_errors_name_the_field(certs, tmp_path):
 
 def test_the_robot_process_refuses_a_network_endpoint_without_security(certs, capsys):
     """``python -m servotau.hal`` checks its endpoints before it builds or serves the robot."""
-    from servotau.hal.robot.server import main
+    from servotau.hal.robot.cli import main
 
     assert main(["--robot", "servotau.simrobot.fake:FakeRobot", "--listen", "tcp/0.0.0.0:7447"]) == 2
     assert "endpoint 'tcp/0.0.0.0:7447' leaves this machine without TLS" in capsys.readouterr().err

@@ -110,7 +110,6 @@ class ClaimTable:
         self.holder: Claimant | None = None
         self.token: bytes | None = None
         self.since = 0.0  # time.monotonic() [s] of the grant
-        self.direct = False  # the holder has its own transport to the robot (else: through a router)
         self.claims_refused = 0
         self.commands_not_claimer = 0  # commands without the holder's token (or with no claim held)
 
@@ -132,7 +131,7 @@ class ClaimTable:
             self.release()
             return json.dumps({"released": True}).encode(), "released"
         zid = req["zid"]
-        if self.holder is not None and self.holder.zid != zid:
+        if self.holder is not None:  # the holder's token is never handed out again: a zid is no secret
             self.claims_refused += 1
             return json.dumps({"granted": False, "holder": asdict(self.holder),
                                "since_s": now - self.since}).encode(), None
@@ -140,13 +139,10 @@ class ClaimTable:
             self.claims_refused += 1
             return json.dumps({"granted": False, "error": f"session {zid} has neither a transport to the robot nor "
                                "its alive/controller/<zid> token: declare the token, then claim"}).encode(), None
-        if self.holder is None:
-            self.holder = Claimant(zid, req.get("host", "?"), req.get("pid", 0), req.get("user", "?"), links.get(zid))
-            self.token, self.since, self.direct = os.urandom(TOKEN_BYTES), now, zid in links
-            event = "granted"
-        else:  # the holder again (a lost reply): the same token
-            event = None
-        return json.dumps({"granted": True, "token": self.token.hex(), "holder": asdict(self.holder)}).encode(), event
+        self.holder = Claimant(zid, req.get("host", "?"), req.get("pid", 0), req.get("user", "?"), links.get(zid))
+        self.token, self.since = os.urandom(TOKEN_BYTES), now
+        return json.dumps({"granted": True, "token": self.token.hex(), "holder": asdict(self.holder)}).encode(), \
+            "granted"
 
     def release(self) -> Claimant | None:
         """End the claim; returns who held it."""

@@ -10,10 +10,11 @@ the servos, or ``None`` once the servos are cut. States (``FLAG_*`` in every fra
   applied, FLAG_RATE_LIMITED; ``"trip"``: HOLDING).
 - HOLDING: hold a position, indefinitely while the encoders are valid, entered when
   no fresh command came for ``hold_after`` [s] (``lockstep_hold_after`` in lock-step) or the claim ended
-  (the claimer's session closed or it released: ``hold_reason``), a command broke a rate limit with ``limit_action = "trip"``,
-  or the encoders went invalid or stale (FLAG_SENSOR_FAULT: hold their last valid reading, per joint; commands
-  are not applied). A fresh command resumes RUNNING (once the encoders are valid again). In lock-step the
-  server holds for a hung controller without stepping (:meth:`watchdog`; simulated time stands still).
+  (the claimer's session closed or it released: ``hold_reason``), a command broke a rate limit with
+  ``limit_action = "trip"``, or the encoders went invalid or stale (FLAG_SENSOR_FAULT: hold their last valid
+  reading, per joint; commands are not applied). A fresh command resumes RUNNING (once the encoders are valid
+  again). In lock-step the server holds for a hung controller without stepping (:meth:`watchdog`; simulated time
+  stands still).
 - SERVO_OFF (latched) on robot-side faults only: ``|q_des - q| > max_position_error`` on a valid joint (as
   HRP-2 does), encoders invalid for more than ``invalid_encoders_after`` [s] of robot time (ticks x period),
   no valid encoder reading ever, or (if set) no fresh command for ``servo_off_after``. :meth:`reset` (the

@@ -12,32 +12,24 @@ firmware (:mod:`servotau.hal.robot.firmware`), step the robot. Clock modes:
 - ``robot``: as realtime, but paced by the robot itself (a real robot's ``step()`` blocks until
   its next tick).
 
-Run it as ``python -m servotau.hal --robot module:callable`` (see ``--help``).
+Run it as ``python -m servotau.hal --robot module:callable`` (:mod:`.cli`; see ``--help``).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import math
 import signal
-import sys
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 import zenoh
 
-from servotau.config import Section
-from servotau.errors import ServotauError
-
-from ..config import import_object
-from ..errors import HalError, MalformedMessage
+from ..errors import MalformedMessage
 from ..log import LogWriter
-from ..registry import hal_section
 from ..wire.protocol import (
     PROTOCOL_VERSION,
     decode_command,
@@ -47,17 +39,16 @@ from ..wire.protocol import (
     keys,
     reject_reason,
 )
-from ..wire.security import Security, check_endpoints, security_from_section
-from ..wire.session import DEFAULT_ENDPOINT, Session, callback, zenoh_config
+from ..wire.session import Session, callback, zenoh_config
 from . import operator
 from .claim import ClaimTable, claim_key
-from .config import CLOCKS, MODES, ServerConfig
-from .firmware import LOG_EXTRA, Firmware, FirmwareState, SafetyConfig, checked_frame
+from .config import CLOCKS, ServerConfig
+from .firmware import LOG_EXTRA, Firmware, FirmwareState, checked_frame
 from .gate import STALE, TAKE, CommandGate
 from .realtime import set_realtime_priority, set_timer_slack
 from .served import ServedRobot
 
-__all__ = ["CLOCKS", "LOG_EXTRA", "RobotServer", "ServerConfig", "main", "serve"]
+__all__ = ["CLOCKS", "LOG_EXTRA", "RobotServer", "ServerConfig", "serve"]
 
 logger = logging.getLogger(__name__)
 
@@ -202,13 +193,18 @@ class RobotServer:
         query.reply(key, body)
 
     def _operator(self, payload: bytes | None) -> str:
-        """Answer an operator request (hal/robot/operator.py); a reset republishes the frame with its state."""
+        """Answer an operator request (hal/robot/operator.py); a reset republishes the frame with its state and
+        ends the claim: a controller still running would otherwise drive the robot back to where it tripped, so
+        the next motion needs a new claim."""
         with self._cond:
             if self._frame is None:
                 return json.dumps({"ok": False, "state": self.firmware.state.name, "error": "not serving yet"})
             body, did = operator.answer(self.firmware, self.robot, self._frame, payload)
             logger.warning("%s: operator request %r: %s", self.info.name, payload[:200] if payload else payload, body)
             if did:
+                holder = self.claims.release()
+                if holder is not None:
+                    logger.warning("%s: the reset ends the claim of %s", self.info.name, holder.describe())
                 self._servo_off_sent = False
                 self._pending = None
                 if self._serving:
@@ -428,73 +424,3 @@ def serve(robot: ServedRobot, config: ServerConfig | None = None,
         for s, h in old.items():
             signal.signal(s, h)
     return server
-
-
-def _safety_of(a) -> SafetyConfig:
-    """[hal.safety] from ``--safety`` (JSON) and the watchdog options, which override it."""
-    given = {"hold_after": a.hold_after, "servo_off_after": a.servo_off_after,
-             "lockstep_hold_after": a.lockstep_hold_after or a.hold_after,
-             "lockstep_servo_off_after": a.lockstep_servo_off_after or a.servo_off_after}
-    try:
-        extra = json.loads(a.safety)
-    except ValueError as exc:
-        raise HalError(f"--safety {a.safety!r}: expected a JSON object of [hal.safety] settings ({exc})") from None
-    if not isinstance(extra, dict):
-        raise HalError(f"--safety {a.safety!r}: expected a JSON object of [hal.safety] settings")
-    return SafetyConfig.from_section(
-        Section({**extra, **{k: v for k, v in given.items() if v is not None}}, "--safety", ""))
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m servotau.hal``: serve a robot built from an import string."""
-    p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0])
-    p.add_argument("--robot", required=True, help="robot factory, 'module:callable'")
-    p.add_argument("--scenario", help="scenario config path passed to the factory")
-    p.add_argument("--kwargs", default="{}", help="JSON object of keyword arguments for the factory")
-    p.add_argument("--name", help="robot name in the keys (default: RobotInfo.name)")
-    p.add_argument("--listen", action="append", help=f"zenoh endpoint to listen on (default {DEFAULT_ENDPOINT})")
-    p.add_argument("--connect", action="append", default=[], help="zenoh endpoint to connect to (router)")
-    p.add_argument("--mode", default=ServerConfig.mode, choices=MODES)
-    p.add_argument("--clock", default=ServerConfig.clock, choices=CLOCKS)
-    p.add_argument("--log", help="Parquet log of what was served")
-    p.add_argument("--max-ticks", type=int)
-    p.add_argument("--no-truth", action="store_true", help="do not publish the ground truth")
-    p.add_argument("--realtime-priority", type=int, default=ServerConfig.realtime_priority,
-                   help="SCHED_FIFO priority 1..99 of the process (0: ordinary scheduling; needs root or "
-                        "CAP_SYS_NICE)")
-    p.add_argument("--hold-after", type=float, help=f"[s] (default {SafetyConfig.hold_after})")
-    p.add_argument("--servo-off-after", type=float, help="[s] no fresh command: servo off (default: never)")
-    p.add_argument("--lockstep-hold-after", type=float, help="[s] lock-step watchdog (default: --hold-after)")
-    p.add_argument("--lockstep-servo-off-after", type=float, help="[s] lock-step (default: --servo-off-after)")
-    p.add_argument("--safety", default="{}", help="JSON object of [hal.safety] settings (hal/robot/safety.py), "
-                                                  'e.g. \'{"limit_action": "trip", "max_command_age_ticks": 5}\'; '
-                                                  "the options above override it")
-    p.add_argument("--ready-file", help="touched once the robot is served (for scripts and tests)")
-    p.add_argument("--security", metavar="HAL_TOML", help="secure the session with the tls, auth, access and "
-                   "insecure_network entries of [hal.server] in this file (docs/real_backend.md)")
-    a = p.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
-    listen = a.listen if a.listen is not None else ([] if a.connect else [DEFAULT_ENDPOINT])
-    try:  # before anything is built or served: a bad file or field is a one-line error
-        security = security_from_section(hal_section(a.security).section("server", {}), robot_side=True) \
-            if a.security else Security()
-        check_endpoints(security, [*listen, *a.connect], robot_side=True)
-        safety = _safety_of(a)
-    except ServotauError as exc:
-        print(f"python -m servotau.hal: error: {exc}", file=sys.stderr)
-        return 2
-    factory = import_object(a.robot)
-    kwargs = json.loads(a.kwargs)
-    robot = factory(a.scenario, **kwargs) if a.scenario else factory(**kwargs)
-    cfg = ServerConfig(robot=a.name, listen=tuple(listen), connect=tuple(a.connect), mode=a.mode, clock=a.clock,
-                       safety=safety,
-                       log=a.log, max_ticks=a.max_ticks,
-                       publish_truth=not a.no_truth, realtime_priority=a.realtime_priority, security=security)
-    ready = (lambda: Path(a.ready_file).touch()) if a.ready_file else None
-    server = serve(robot, cfg, ready)
-    print(json.dumps(server.status()), flush=True)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

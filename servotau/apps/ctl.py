@@ -24,7 +24,7 @@ import json
 import sys
 
 from servotau.control.operator import ACTIONS
-from servotau.errors import HalError
+from servotau.errors import HalError, ServotauError
 
 ANSWER_TIMEOUT = 5.0  # [s] wall time to wait for the answer (a reset is applied at the controller's next tick)
 
@@ -53,8 +53,9 @@ def operator_key(robot: str, robot_side: bool = False) -> str:
 
 
 def send(action: str, *, robot: str, connect: list[str], robot_side: bool = False,
-         timeout: float = ANSWER_TIMEOUT) -> dict:
-    """Send ``{"action": action}`` and return the JSON answer (``ok``, ``state``, ``error``).
+         timeout: float = ANSWER_TIMEOUT, security=None) -> dict:
+    """Send ``{"action": action}`` and return the JSON answer (``ok``, ``state``, ``error``); ``security``: the
+    controller side's TLS and authentication (:class:`~servotau.hal.wire.security.Security`, [hal.zenoh]).
 
     Raises:
         HalError: Nobody answered within ``timeout`` [s], or the answer is not a JSON object.
@@ -63,7 +64,8 @@ def send(action: str, *, robot: str, connect: list[str], robot_side: bool = Fals
 
     key = operator_key(robot, robot_side)
     who = "robot" if robot_side else "controller"
-    session = Session(zenoh_config(connect=connect, mode="client"))  # a peer routes its clients' queries
+    session = Session(zenoh_config(connect=connect, mode="client", security=security))  # a peer routes its
+    # clients' queries
     try:
         replies = list(session.z.get(key, payload=json.dumps({"action": action}).encode(), timeout=timeout))
     finally:
@@ -84,22 +86,30 @@ def send(action: str, *, robot: str, connect: list[str], robot_side: bool = Fals
     raise HalError(f'no {who} of robot "{robot}" answered {key} within {timeout} s via {", ".join(connect)}: {hint}')
 
 
-def _defaults(args) -> tuple[str, list[str]]:
+def _defaults(args):
+    """Robot name, endpoints and security of the controller side ([hal.zenoh] of ``--hal``), as the controller
+    connects: with TLS and access control the operator needs an identity whose role may ``operator``."""
     from servotau.hal.config import endpoint_list
     from servotau.hal.registry import hal_section
+    from servotau.hal.wire.security import check_endpoints, security_from_section
 
     z = hal_section(args.hal).section("zenoh", {})
     robot = args.robot or z.str("robot", "hrp2")
+    security = security_from_section(z, robot_side=False)
     if args.port is not None:
-        return robot, [f"tcp/127.0.0.1:{args.port}"]
-    return robot, args.connect or endpoint_list(z, "connect", ["tcp/127.0.0.1:7447"])
+        connect = [f"tcp/127.0.0.1:{args.port}"]
+    else:
+        connect = args.connect or endpoint_list(z, "connect", ["tcp/127.0.0.1:7447"])
+    check_endpoints(security, connect, robot_side=False)
+    return robot, connect, security
 
 
 def main(args) -> int:
-    robot, connect = _defaults(args)
     try:
-        answer = send(args.action, robot=robot, connect=connect, robot_side=args.robot_side, timeout=args.timeout)
-    except HalError as exc:
+        robot, connect, security = _defaults(args)
+        answer = send(args.action, robot=robot, connect=connect, robot_side=args.robot_side, timeout=args.timeout,
+                      security=security)
+    except ServotauError as exc:  # nobody answered, or a bad [hal.zenoh] (names the field)
         print(f"servotau ctl: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(answer), flush=True)
