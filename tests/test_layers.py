@@ -21,7 +21,8 @@ REPO = Path(__file__).resolve().parent.parent
 # Loaded by no library: the simulator, MuJoCo, the Rerun viewer and the applications; Zenoh only by the HAL
 # modules that talk it (the contracts name the same three).
 HEAVY = ("zenoh", "mujoco", "rerun", "servotau.simrobot", "servotau.apps", "servotau.cli")
-ZENOH_MODULES = ("servotau.hal.wire.session", "servotau.hal.backends.zenoh", "servotau.hal.robot.server")
+ZENOH_MODULES = ("servotau.hal.wire.session", "servotau.hal.backends.zenoh", "servotau.hal.robot.server",
+                 "servotau.hal.robot.cli")
 LIBRARIES = ("servotau.signal", "servotau.description", "servotau.actuator", "servotau.hal", "servotau.estimation",
              "servotau.control", "servotau.identification")
 # Imports each module named on the command line, then prints which HEAVY modules that import added.
