@@ -102,7 +102,9 @@ def test_ctl_without_an_answer_is_a_clear_error_and_the_robot_answers_its_own_re
                                                "--timeout", "5"])
         code = ctl.main(args)
     out = capsys.readouterr().out
-    assert code in (0, 1) and '"state": "WAITING"' in out, out
+    assert code == 0 and '"state": "WAITING"' in out, out  # not latched: ok, nothing changes
+    args = build_parser("ctl").parse_args(["ctl", "release", "--robot-side", "--port", "1"])
+    assert ctl.main(args) == 2 and "--robot-side release: expected reset" in capsys.readouterr().err
 
 
 def test_the_exit_waits_for_the_threads_the_command_started():

@@ -61,7 +61,3 @@ class RateLimiter:
         """``q_des`` [rad] was applied this tick."""
         self._v = (q_des - self._q) / self.dt
         self._q = np.array(q_des, dtype=float)
-
-    def exceeds(self, target: np.ndarray) -> np.ndarray:
-        """Joints on which ``target`` breaks a limit (boolean mask)."""
-        return np.abs(self.bound(target) - target) > _TOL

@@ -100,8 +100,10 @@ def make_certs(directory: str | Path, *, robot_hosts: list[str], controller_host
     ``directory`` (created; existing files are kept unless ``force``)."""
     d = Path(directory)
     for name in clients:
-        if not _NAME.match(name) or name in ("ca", "robot", "controller"):
-            raise ConfigError(f"--client {name!r}: expected a new name of letters, digits, '_', '.' or '-'")
+        if not _NAME.match(name) or name in ("ca", "robot", "controller", ROBOT_CN, CONTROLLER_CN):
+            raise ConfigError(f"--client {name!r}: expected a new name of letters, digits, '_', '.' or '-' (not the "
+                              f"robot's or the controller's, {ROBOT_CN!r} and {CONTROLLER_CN!r}: a client certificate "
+                              "of that name would carry their rights)")
     stems = ["ca", "robot", "controller", *clients]
     existing = [p for s in stems for p in (d / f"{s}.pem", d / f"{s}-key.pem") if p.exists()]
     if existing and not force:

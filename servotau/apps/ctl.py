@@ -105,6 +105,10 @@ def _defaults(args):
 
 
 def main(args) -> int:
+    if args.robot_side and args.action != "reset":
+        print(f"servotau ctl: --robot-side {args.action}: expected reset (the robot process answers only reset; "
+              "its state is on servotau/v1/<robot>/status)", file=sys.stderr)
+        return 2
     try:
         robot, connect, security = _defaults(args)
         answer = send(args.action, robot=robot, connect=connect, robot_side=args.robot_side, timeout=args.timeout,
