@@ -21,7 +21,8 @@ from ..signals import Signals, smooth_sign, smooth_sign_scalar
 ORDER = 30
 V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
 LEVELS = (0.0, 0.3, 0.6)  # Coulomb friction / breakaway friction
-GRID = tuple({"v_s": v, "v_eps": e, "level": c} for c in LEVELS for v in V_S for e in (0.005, 0.01, 0.02))
+GRID = tuple({"v_s": v, "v_eps": e, "level": c} for c in LEVELS for v in V_S
+             for e in ((0.005, 0.01, 0.02) if c == 0.0 else (0.01,)))  # the excess's sign smoothing matters most
 
 
 def stribeck(s: Signals, v_s: float, v_eps: float, level: float = 0.0) -> np.ndarray:
