@@ -20,13 +20,14 @@ PERIODS = (0.01, 0.32)  # [rad] the shortest and longest ripple periods tried
 COARSE = tuple({"period": p} for p in np.geomspace(*PERIODS, 11).round(4).tolist())  # [rad] without positions
 SAMPLES_PER_PERIOD = 4  # positions sampled per ripple period (at most the largest gap apart) that resolve a ripple
 DRIFT = 0.125  # [periods] the largest phase drift, at either end of the sweep, of a ripple half a grid step off
+MIN_STEP = 0.05  # the finest relative step: short periods over a long sweep drift more (their cost grows as 1/step)
 
 
 def grid(s: Signals) -> tuple[dict[str, float], ...]:
     """``COARSE`` and periods spaced so that a ripple between two of them drifts at most ``DRIFT`` of a period
-    against the nearer one over the log's position sweep (a step of ``4 DRIFT period / span``, at least 2 %): a
-    41 % step alone leaves a ripple of 10 periods or more in the sweep unfitted. The sweep's span [rad] is the
-    range of ``q``; without it, ``COARSE``."""
+    against the nearer one over the log's position sweep (a step of ``4 DRIFT period / span``, at least
+    ``MIN_STEP``): a 41 % step alone leaves a ripple of 10 periods or more in the sweep unfitted. The sweep's span
+    [rad] is the range of ``q``; without it, ``COARSE``."""
     q = s.get("q")
     span = float(np.ptp(q)) if q is not None and q.size > 1 else 0.0
     if not span > 0:
@@ -34,7 +35,7 @@ def grid(s: Signals) -> tuple[dict[str, float], ...]:
     periods, p = {g["period"] for g in COARSE}, PERIODS[0]
     while p < PERIODS[1]:
         periods.add(round(p, 6))
-        p *= 1.0 + max(4.0 * DRIFT * p / span, 0.02)
+        p *= 1.0 + max(4.0 * DRIFT * p / span, MIN_STEP)
     return tuple({"period": v} for v in sorted(periods))
 
 
