@@ -132,3 +132,17 @@ def test_unknown_joint_in_the_limits_is_refused():
     s = SafetyConfig.from_section(Section({"joints": {"NOPE": {"max_velocity": 1.0}}}, "hal.toml", "safety"))
     with pytest.raises(HalError, match=r'safety.joints.NOPE: "NOPE" is not a joint of fake'):
         Firmware(INFO, s)
+
+
+def test_an_unknown_joint_in_the_limits_is_a_one_line_error_before_serving(capsys):
+    """python -m servotau.hal with [hal.safety.joints] naming no joint of the robot: exit 2 naming the field and
+    the joints expected, no traceback, nothing served."""
+    from support.hal import free_port
+
+    from servotau.hal.robot.cli import main
+
+    code = main(["--robot", "servotau.simrobot.fake:FakeRobot", "--listen", f"tcp/127.0.0.1:{free_port()}",
+                 "--max-ticks", "1", "--safety", '{"joints": {"NOPE": {"max_velocity": 1.0}}}'])
+    err = capsys.readouterr().err
+    assert code == 2 and 'safety.joints.NOPE: "NOPE" is not a joint of fake: expected one of' in err, err
+    assert "Traceback" not in err

@@ -82,7 +82,11 @@ def main(argv: list[str] | None = None) -> int:
                        log=a.log, max_ticks=a.max_ticks,
                        publish_truth=not a.no_truth, realtime_priority=a.realtime_priority, security=security)
     ready = (lambda: Path(a.ready_file).touch()) if a.ready_file else None
-    server = serve(robot, cfg, ready)
+    try:  # settings checked against the robot (joint names of [hal.safety.joints]) fail here, before it moves
+        server = serve(robot, cfg, ready)
+    except ServotauError as exc:
+        print(f"python -m servotau.hal: error: {exc}", file=sys.stderr)
+        return 2
     print(json.dumps(server.status()), flush=True)
     return 0
 
