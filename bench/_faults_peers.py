@@ -71,6 +71,17 @@ def kill_group(p: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float = 
 
 
 @contextmanager
+def _served(args: list[str], out: Path, ready: Path, what: str):
+    """The process of ``args`` (output to ``out``), once it touched ``ready``; its process group killed at the end."""
+    p = spawn(args, out)
+    try:
+        wait_ready(p, ready, 60.0, f"{what}: {out}")
+        yield p
+    finally:
+        kill_group(p)
+
+
+@contextmanager
 def robot_process(tmp: Path, *, robot: str = FAKE, clock: str = "lockstep", log: Path | None = None,
                   safety: dict | None = None, kwargs: dict | None = None, scenario: str | None = None,
                   security: Path | None = None, tls: bool = False, name: str | None = None):
@@ -86,12 +97,8 @@ def robot_process(tmp: Path, *, robot: str = FAKE, clock: str = "lockstep", log:
     args += ["--safety", json.dumps(safety)] if safety else []
     args += ["--security", str(security)] if security else []
     args += ["--name", name] if name else []
-    p = spawn(args, tmp / f"robot-{port}.out")
-    try:
-        wait_ready(p, ready, 60.0, f"robot process ({' '.join(args)}): {tmp / f'robot-{port}.out'}")
+    with _served(args, tmp / f"robot-{port}.out", ready, f"robot process ({' '.join(args)})") as p:
         yield p, ep
-    finally:
-        kill_group(p)
 
 
 @contextmanager
@@ -104,12 +111,8 @@ def sim_process(tmp: Path, *, clock: str = "lockstep", log: Path | None = None, 
     args += ["--log", str(log)] if log else []
     args += ["--config", str(config)] if config else []
     args += ["--hal", str(hal)] if hal else []
-    p = spawn(args, tmp / f"sim-{port}.out")
-    try:
-        wait_ready(p, ready, 60.0, f"servotau sim ({tmp / f'sim-{port}.out'})")
+    with _served(args, tmp / f"sim-{port}.out", ready, "servotau sim") as p:
         yield p, port
-    finally:
-        kill_group(p)
 
 
 def sim_config_with_faults(tmp: Path, start: float, duration: float) -> Path:
