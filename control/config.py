@@ -107,6 +107,10 @@ class SafetyLimits:
     max_torque: np.ndarray  # [N m] |tau_hat|
     max_velocity: np.ndarray  # [rad/s] |dq_hat|
     joint_limit_margin: float = setting(0.02, unit="rad", min=0)  # q must stay in [q_min + margin, q_max - margin]
+    # The hold after a trip brakes: q_des = q_hold - hold_damping * dq (encoder backward difference), the term
+    # faded to zero over hold_brake_time: damping the servo lacks, so a joint caught moving stops sooner.
+    hold_damping: float = setting(0.01, unit="s", min=0)
+    hold_brake_time: float = setting(0.2, unit="s", min=0)
 
     def __post_init__(self):
         n = None
@@ -121,14 +125,17 @@ class SafetyLimits:
 
     @classmethod
     def uniform(cls, n: int, **limits: float) -> SafetyLimits:
-        """The same limits for all ``n`` joints: ``limits`` overrides the fields of :class:`JointLimits` and
-        ``joint_limit_margin``, the others take their defaults."""
-        margin = limits.pop("joint_limit_margin", cls.joint_limit_margin)
+        """The same limits for all ``n`` joints: ``limits`` overrides the fields of :class:`JointLimits` and the
+        scalar settings (``joint_limit_margin``, ``hold_*``), the others take their defaults."""
+        scalars = {k: limits.pop(k) for k in SCALAR_SAFETY if k in limits}
         values = {f.name: limits.pop(f.name, f.default) for f in fields(JointLimits)}
         if limits:
             raise ControlError(f"SafetyLimits.uniform: unknown limits {sorted(limits)}: expected among "
-                               f"{[f.name for f in fields(JointLimits)]}")
-        return cls(**{k: np.full(n, v) for k, v in values.items()}, joint_limit_margin=margin)
+                               f"{[f.name for f in fields(JointLimits)] + list(SCALAR_SAFETY)}")
+        return cls(**{k: np.full(n, v) for k, v in values.items()}, **scalars)
+
+
+SCALAR_SAFETY = ("joint_limit_margin", "hold_damping", "hold_brake_time")  # [safety] settings of every joint at once
 
 
 @dataclass(frozen=True)
@@ -355,7 +362,7 @@ def _force(fs: Section) -> ForceTask:
 
 def _safety(sec: Section, info: RobotInfo) -> SafetyLimits:
     """``[safety]``: the limits of every joint, ``[safety.joints.<name>]`` overrides, joint_limit_margin."""
-    limits = load_dataclass(JointLimits, sec, ignore=["joint_limit_margin", "joints"])
+    limits = load_dataclass(JointLimits, sec, ignore=[*SCALAR_SAFETY, "joints"])
     arrays = {f.name: np.full(info.nq, getattr(limits, f.name)) for f in fields(JointLimits)}
     per_joint = sec.section("joints", {})
     for j in per_joint.keys():

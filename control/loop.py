@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from servotau.estimation import Estimate, EstimatorConfig, TorqueEstimator, calibrate_ft_offsets
+from servotau.estimation import Estimate, EstimatorConfig, FtOffsetAverage, TorqueEstimator
 from servotau.hal.types import SensorFrame
 
 from .manager import ControlManager, Mode
@@ -138,8 +138,10 @@ class ControlLoop:
         mode: Mode requested after the settle phase: ``position`` or ``torque``.
         settle: [s] of position mode first (0: no settle phase, no F/T calibration).
         hooks: Observers called every tick, in order.
-        ft_offsets: ``f(settle_frames) -> (n_ft, 6)`` F/T offsets [N, N m] (default: calibrated on the frames,
-            :func:`~servotau.estimation.calibrate_ft_offsets`; pass another when the feet are loaded).
+        ft_offsets: ``f(settle_frames) -> (n_ft, 6)`` F/T offsets [N, N m] (pass one when the feet are loaded;
+            default: the estimates of the settle ticks averaged as they come,
+            :class:`~servotau.estimation.FtOffsetAverage`, as :func:`~servotau.estimation.calibrate_ft_offsets`
+            would compute them on the frames but without a second pass that stalls the loop).
     """
 
     def __init__(self, backend, manager: ControlManager | None = None, estimator: TorqueEstimator | None = None,
@@ -152,12 +154,9 @@ class ControlLoop:
         self.mode = Mode(mode)
         self.settle_ticks = int(round(settle / info.period))
         self.hooks = tuple(hooks)
-        self._ft_offsets = ft_offsets or self._calibrate
+        self._ft_offsets = ft_offsets
         self._frame: SensorFrame | None = None
         self.hold: TrajectoryPoint | None = None  # the start posture, at rest (set by start())
-
-    def _calibrate(self, frames: list[SensorFrame]) -> np.ndarray:
-        return calibrate_ft_offsets(frames, self.info, self.estimator.config)
 
     def start(self) -> SensorFrame:
         """Read the first frame (once): its ``q`` is the start posture held while settling."""
@@ -187,7 +186,8 @@ class ControlLoop:
         names, dt, n_settle = self.info.joint_names, self.info.period, self.settle_ticks
         truth_wanted = any(h.wants_truth for h in hooks)
         clock = time.perf_counter_ns
-        settle_frames: list[SensorFrame] = []
+        settle_frames: list[SensorFrame] = []  # for a given ft_offsets function
+        average = FtOffsetAverage(self.info, estimator.ft_offsets) if self._ft_offsets is None else None
         total = n_settle + int(round(duration / dt))
         seq0 = frame.seq
         state = "settling" if n_settle else "running"
@@ -206,12 +206,15 @@ class ControlLoop:
                 k += 1
                 i = frame.seq - seq0  # robot ticks since the first frame: frames may be skipped
                 if not calibrated and i >= n_settle - 1:
-                    estimator.set_ft_offsets(self._ft_offsets(settle_frames))
+                    offsets = average.offsets(estimator.config) if average else self._ft_offsets(settle_frames)
+                    estimator.set_ft_offsets(offsets)
                     calibrated = True
-                if i < n_settle:
+                if i < n_settle and average is None:
                     settle_frames.append(frame)
                 t0 = clock()
                 estimate = estimator.update(frame)
+                if not calibrated and average is not None:
+                    average.add(estimate)
                 tick = Tick(k, (i - n_settle) * dt, frame, estimate, estimation_ns=clock() - t0)
                 if not settled and i >= n_settle:
                     settled = True

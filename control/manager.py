@@ -19,8 +19,13 @@ Modes:
   frames than the estimator's ``max_gap`` (``gap_fallback = "position"``, counted in ``gap_fallbacks``; with
   ``"trip"``: the ``estimate_gap`` trip), and returns to torque mode once it is valid again.
 - ``hold``: entered by a safety trip; ``q_des`` = the last valid measured angles at the trip, the torque terms
-  zero, the integrals frozen. Every held tick the checks still run on the frame, the estimate and the held
-  command, without latching: :attr:`ControlManager.condition` says whether the trip's cause is still there.
+  zero, the integrals frozen. For the first ``safety.hold_brake_time`` the hold also brakes: ``q_des -=
+  hold_damping * dq`` (encoders' backward difference within +-``max_velocity``, not the delayed estimate; the
+  term fades out with a half-cosine), which adds the damping ``k_p hold_damping`` to a servo that stops a moving
+  joint with too little (HRP-2's hip: damping ratio about 0.3 alone, so a joint caught at 1.8 rad/s overshoots
+  ~11 mrad).
+  Every held tick the checks still run on the frame, the estimate and the held command, without latching:
+  :attr:`ControlManager.condition` says whether the trip's cause is still there.
   Only a reset leaves the hold (into position mode): :meth:`try_reset` refuses while a check still fails,
   :meth:`reset` clears it unconditionally.
 
@@ -102,6 +107,10 @@ class ControlManager:
         self._started = False  # a command was sent (terms.q_des holds the last one)
         self._q_good = np.clip(np.zeros(n), info.q_min, info.q_max)  # last finite encoder reading
         self._q_hold = np.zeros(n)
+        self._t_hold = 0.0  # [s] robot time of the trip
+        self._q_last = np.full(n, np.nan)  # [rad] encoders of the previous frame
+        self._t_last = math.nan  # [s] its robot time
+        self._dq_fd = np.zeros(n)  # [rad/s] encoders' backward difference (0 where not finite)
         self._cmd = np.zeros(n)
         self.gap_fallbacks = 0  # torque mode fell back to position control after skipped frames (gap_fallback)
 
@@ -200,6 +209,7 @@ class ControlManager:
         """
         t = self.terms
         t.time, t.seq = frame.time, frame.seq
+        self._difference(frame)
         has_estimate = estimate is not None and getattr(estimate, "valid", True)
         if self._report is not None:
             t = self._hold(frame)
@@ -270,6 +280,21 @@ class ControlManager:
             return 0.0
         return 0.5 * (1.0 + math.cos(math.pi * max(elapsed, 0.0) / T))
 
+    def _difference(self, frame: SensorFrame) -> None:
+        """Update the encoders' backward difference [rad/s] (0 for a joint without two finite readings; within
+        +-``safety.max_velocity``)."""
+        dt = float(frame.time) - self._t_last
+        if dt > 0.0:
+            np.subtract(frame.q, self._q_last, out=self._dq_fd)
+            self._dq_fd /= dt
+        else:
+            self._dq_fd.fill(0.0)
+        self._dq_fd[~np.isfinite(self._dq_fd)] = 0.0
+        v = self.config.safety.max_velocity  # an encoder glitch must not become a large braking command
+        np.clip(self._dq_fd, -v, v, out=self._dq_fd)
+        np.copyto(self._q_last, frame.q)
+        self._t_last = float(frame.time)
+
     def _base(self, estimate) -> BaseState | None:
         if self.config.base != "floating":
             return None
@@ -283,6 +308,7 @@ class ControlManager:
         np.copyto(self._q_hold, self._q_good)  # last finite reading
         if not (report.check == "sensor_status" and report.where == "encoders"):  # else no valid angle in it
             np.copyto(self._q_hold, q, where=np.isfinite(q))
+        self._t_hold = float(frame.time)
         log.error("%s: holding the last valid measured posture", report.message)
         return self._hold(frame)
 
@@ -301,10 +327,16 @@ class ControlManager:
         t.mode = Mode.HOLD.value
         t.tripped = True
         t.q_des[:] = self._q_hold
-        np.subtract(self._q_hold, frame.q, out=t.dq_err)
+        s = self.config.safety
+        elapsed = float(frame.time) - self._t_hold
+        if s.hold_damping > 0.0 and elapsed < s.hold_brake_time:
+            w = 0.5 * (1.0 + math.cos(math.pi * max(elapsed, 0.0) / s.hold_brake_time))
+            t.q_des -= (s.hold_damping * w) * self._dq_fd
+        np.subtract(t.q_des, frame.q, out=t.dq_err)
         t.position_command[:] = t.dq_err
         t.switch_offset.fill(0.0)
         self._fading = False
         self.law.clear(t)
         self._started = True
         return t
+

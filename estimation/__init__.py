@@ -2,7 +2,14 @@
 
 from servotau.signal.savgol import CausalSavgol, savgol_centred
 
-from .calibration import Payload, calibrate_ft_offsets, calibrate_gyro_bias, identify_payload, payload_samples
+from .calibration import (
+    FtOffsetAverage,
+    Payload,
+    calibrate_ft_offsets,
+    calibrate_gyro_bias,
+    identify_payload,
+    payload_samples,
+)
 from .config import EstimatorConfig, FilterSettings, ModelPerturbation, PredictionSettings
 from .delay_line import DelayLine
 from .dynamics import InverseDynamics
@@ -26,6 +33,7 @@ __all__ = [
     "Payload",
     "PredictionSettings",
     "TorqueEstimator",
+    "FtOffsetAverage",
     "calibrate_ft_offsets",
     "calibrate_gyro_bias",
     "estimate_offline",

@@ -43,23 +43,51 @@ def calibrate_ft_offsets(frames: Iterable[SensorFrame], info: RobotInfo, config:
         :meth:`EstimatorConfig.with_calibration` or :meth:`TorqueEstimator.set_ft_offsets`.
     """
     config = EstimatorConfig.from_toml() if config is None else config
-    names = list(info.ft_sensor_names if sensors is None else sensors)
-    rows = [info.ft_index(s) for s in names]
-    est = TorqueEstimator(info, config.with_calibration(ft_offsets=np.zeros_like(config.ft_offsets)))
-    total = np.zeros((len(info.ft_sensor_names), 6))
-    count = np.zeros(len(info.ft_sensor_names))
+    zero = np.zeros_like(config.ft_offsets)
+    est = TorqueEstimator(info, config.with_calibration(ft_offsets=zero))
+    average = FtOffsetAverage(info, zero)
     for frame in frames:
-        e = est.update(frame)
-        ok = e.wrenches_valid
-        total[ok] += e.wrenches[ok]
-        count[ok] += 1
-    offsets = np.array(config.ft_offsets)
-    for r, s in zip(rows, names, strict=True):
-        if count[r] < 1:
-            raise EstimationError(f'F/T sensor "{s}": no valid estimate in the frames: expected more than '
-                                  f"one filter window ({config.ft.window} samples) of good readings")
-        offsets[r] = total[r] / count[r]
-    return offsets
+        average.add(est.update(frame))
+    return average.offsets(config, sensors)
+
+
+class FtOffsetAverage:
+    """:func:`calibrate_ft_offsets` tick by tick, from the estimates of the estimator already running (no second
+    pass over the frames, so no stall at the end of a settle phase).
+
+    The estimator subtracts its offsets before its linear filters and compensation, so the wrench it would
+    estimate with zero offsets is its estimate plus the offsets it uses (``offsets_in_use``, constant while
+    averaging)::
+
+        average = FtOffsetAverage(info, estimator.ft_offsets)
+        for frame in settle_frames: average.add(estimator.update(frame))
+        estimator.set_ft_offsets(average.offsets(estimator.config))
+    """
+
+    def __init__(self, info: RobotInfo, offsets_in_use: np.ndarray):
+        self.info = info
+        self._in_use = np.array(offsets_in_use, dtype=float)  # [N, N m] (n_ft, 6)
+        self._total = np.zeros_like(self._in_use)
+        self._count = np.zeros(len(self._in_use))
+
+    def add(self, estimate) -> None:
+        """One tick's estimate (``wrenches`` (n_ft, 6) [N, N m], ``wrenches_valid`` (n_ft,))."""
+        ok = estimate.wrenches_valid
+        self._total[ok] += estimate.wrenches[ok] + self._in_use[ok]
+        self._count[ok] += 1
+
+    def offsets(self, config: EstimatorConfig, sensors: Iterable[str] | None = None) -> np.ndarray:
+        """Offsets (n_ft, 6) [N, N m] as :func:`calibrate_ft_offsets` returns them (``sensors``: the rows
+        calibrated, default all; the others keep ``config.ft_offsets``)."""
+        names = list(self.info.ft_sensor_names if sensors is None else sensors)
+        offsets = np.array(config.ft_offsets, dtype=float)
+        for s in names:
+            r = self.info.ft_index(s)
+            if self._count[r] < 1:
+                raise EstimationError(f'F/T sensor "{s}": no valid estimate in the frames: expected more than '
+                                      f"one filter window ({config.ft.window} samples) of good readings")
+            offsets[r] = self._total[r] / self._count[r]
+        return offsets
 
 
 def calibrate_gyro_bias(frames: Iterable[SensorFrame]) -> np.ndarray:

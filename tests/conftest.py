@@ -37,3 +37,11 @@ def _workbench_pool():
 
     for pool in workbench_cases.POOL:
         pool.shutdown(cancel_futures=True)
+
+
+@pytest.hookimpl(trylast=True)  # after `-m` has deselected
+def pytest_collection_modifyitems(config, items):
+    """Prefetch the workbench's slow cases only when a slow test is selected (tests/support/workbench_cases)."""
+    from support import workbench_cases
+
+    workbench_cases.PREFETCH_SLOW = any(item.get_closest_marker("slow") for item in items)

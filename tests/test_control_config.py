@@ -97,6 +97,8 @@ def test_k7_scaling_divides_the_velocity_gain_by_sqrt_k6():
     ("contacts", ["left_knee"], "contacts", "F/T sensors"),
     ("safety.max_torque", -5.0, "safety.max_torque", "> 0"),
     ("safety.max_velocity", math.inf, "safety.max_velocity", "finite"),
+    ("safety.hold_damping", -0.01, "safety.hold_damping", ">= 0"),
+    ("safety.hold_brake_time", math.nan, "safety.hold_brake_time", "finite"),
     ("safety.joints", {"KNEE": {"max_torque": 10.0}}, "safety.joints.KNEE", "joint of test-robot"),
     ("force", {"sensor": "right_ankle", "frame": "ft_right_ankle", "axes": ["fz", "fw"], "k_f": [1.0, 1.0]},
      "force.axes", "distinct axes"),

@@ -112,3 +112,44 @@ def test_position_mode_sends_the_reference():
     np.testing.assert_allclose(out.position_command, q_ref - frame.q)
     np.testing.assert_allclose(out.component_sum(), out.dq_err, atol=1e-15)
     assert not out.ff_torque.any() and out.tau_d.any()  # the law runs in the shadow, its terms are not sent
+
+
+def _caught_moving(hold_damping: float, joint: str = "RLEG_JOINT2", speed: float = -1.8, trip_tick: int = 250):
+    """The hanging robot in position mode sweeps ``joint`` at ``speed`` [rad/s]; at ``trip_tick`` the reference
+    jumps 0.2 rad (a command-error trip). Returns the true angle [rad] from the trip on, q_des of the held ticks
+    and the held posture."""
+    robot = SimRobot(SimConfig.named("hanging"))
+    info = robot.info
+    data = copy.deepcopy(BASE)
+    data["safety"]["hold_damping"] = hold_damping
+    mgr = ControlManager(info, ControlConfig.from_mapping(data, info))
+    j = info.joint_index(joint)
+    frame = robot.read()
+    q0 = frame.q.copy()
+    q_true, q_des = [], []
+    for k in range(trip_tick + 600):
+        ref_q = q0.copy()
+        ref_q[j] += speed * max(k - 50, 0) * info.period + (0.2 if k >= trip_tick else 0.0)
+        out = mgr.tick(frame, None, TrajectoryPoint(ref_q, np.zeros(info.nq), np.zeros(info.nq)))
+        robot.step(out.q_des)
+        frame = robot.read()
+        if k >= trip_tick:
+            q_true.append(robot.ground_truth().q[j])
+            q_des.append(out.q_des.copy())
+    assert mgr.tripped and mgr.report.check == "command_error"
+    return np.array(q_true), np.array(q_des), mgr.hold_posture.copy(), j
+
+
+def test_the_hold_brakes_a_joint_caught_moving_then_holds_the_measured_posture():
+    """A hip caught at 1.8 rad/s: the braking hold (hold_damping 0.01 s) stops it in less travel past the trip
+    posture than the plain hold (HRP-2's servo alone is underdamped there), then q_des is exactly the held
+    posture once the braking term has faded (hold_brake_time), and the joint comes to rest on it."""
+    travel = {}
+    for c in (0.0, 0.01):
+        q_true, q_des, q_hold, j = _caught_moving(c)
+        travel[c] = np.abs(q_true - q_hold[j]).max()
+        brake_ticks = 200  # hold_brake_time 0.2 s of config/control.toml at 1 kHz
+        np.testing.assert_array_equal(q_des[brake_ticks:], np.broadcast_to(q_hold, q_des[brake_ticks:].shape))
+        assert abs(q_true[-1] - q_true[-100]) < 1e-4  # at rest: under 1 mrad/s
+        assert abs(q_true[-1] - q_hold[j]) < 0.005  # on the posture, but for the servo's static (gravity) error
+    assert travel[0.01] < 0.75 * travel[0.0], travel

@@ -68,12 +68,31 @@ def _fault(check):
     return _frame(k), est, _ref(), "RLEG_JOINT3"
 
 
+def test_an_encoder_glitch_brakes_the_hold_by_at_most_hold_damping_times_max_velocity():
+    """The joint-limit fault (the knee's reading jumps 1.7 rad in a tick): the braking term of the hold stays
+    within hold_damping * max_velocity of the measured angles, and is gone after hold_brake_time."""
+    mgr = ControlManager.from_toml(INFO)
+    s = mgr.config.safety
+    for k in range(10):
+        mgr.tick(_frame(k), _estimate(), _ref())
+    frame, est, ref, _ = _fault("joint_limit")
+    out = mgr.tick(frame, est, ref)
+    assert mgr.report.check == "joint_limit"
+    brake = np.abs(out.q_des - frame.q)
+    assert brake.max() > 0 and np.all(brake <= s.hold_damping * s.max_velocity + 1e-12)
+    for k in range(11, 11 + round(s.hold_brake_time / INFO.period) + 1):
+        out = mgr.tick(_frame(k), _estimate(), _ref())
+    np.testing.assert_array_equal(out.q_des, frame.q)
+
+
 @pytest.mark.parametrize("check", [*CHECKS, None])
 def test_each_check_trips_and_latches_a_hold(check):
     """A fault trips the named check (joint, value vs limit); the hold keeps the measured angles until reset()."""
-    mgr = ControlManager.from_toml(INFO)
+    config = ControlManager.from_toml(INFO).config
+    config = dataclasses.replace(config, safety=dataclasses.replace(config.safety, hold_damping=0.0))  # no braking
     if check == "estimate_gap":  # the default falls back to position control instead
-        mgr = ControlManager(INFO, dataclasses.replace(mgr.config, gap_fallback="trip"))
+        config = dataclasses.replace(config, gap_fallback="trip")
+    mgr = ControlManager(INFO, config)
     mgr.request_mode("torque")
     for k in range(10):
         mgr.tick(_frame(k), _estimate(), _ref())

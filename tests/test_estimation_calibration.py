@@ -9,6 +9,7 @@ import pytest
 from servotau.config import CONFIG_DIR
 from servotau.errors import EstimationError
 from servotau.estimation.calibration import (
+    FtOffsetAverage,
     calibrate_ft_offsets,
     calibrate_gyro_bias,
     identify_payload,
@@ -89,6 +90,27 @@ def test_calibrating_only_some_sensors_keeps_the_other_offsets():
     assert np.all(offsets[:3] == 7.0) and np.abs(offsets[3]).max() < 5.0
     with pytest.raises(EstimationError, match="no valid estimate"):
         calibrate_ft_offsets(frames[:50], robot.info, config)
+
+
+def test_offsets_averaged_tick_by_tick_from_a_running_estimator_equal_the_second_pass():
+    """FtOffsetAverage on the estimates of an estimator using other offsets (as the control loop's settle phase)
+    gives calibrate_ft_offsets's offsets on the same frames, and the same error without enough of them."""
+    robot = hanging_robot()
+    frames = []
+    for k in range(300):
+        robot.step(robot.read().q + 0.02 * np.sin(k / 40))  # moving: the compensation is not trivial
+        frames.append(robot.read())
+    config = EstimatorConfig().with_calibration(ft_offsets=np.random.default_rng(3).normal(0.0, 5.0, (4, 6)))
+    running = TorqueEstimator(robot.info, config)
+    average = FtOffsetAverage(robot.info, running.ft_offsets)
+    for f in frames:
+        average.add(running.update(f))
+    np.testing.assert_allclose(average.offsets(config), calibrate_ft_offsets(frames, robot.info, config), atol=1e-9)
+    some = average.offsets(config, sensors=["left_wrist"])
+    assert np.all(some[:3] == config.ft_offsets[:3])
+    short = FtOffsetAverage(robot.info, running.ft_offsets)
+    with pytest.raises(EstimationError, match='"right_ankle": no valid estimate'):
+        short.offsets(config)
 
 
 def test_gyro_bias_is_the_mean_reading_at_rest():

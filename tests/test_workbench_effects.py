@@ -12,7 +12,16 @@ import json
 
 import numpy as np
 import pytest
-from support.workbench_cases import CACHE_DIR, PAIRS, SINGLE, outcome, run_pairs, sim_dataset, sim_log
+from support.workbench_cases import (
+    CACHE_DIR,
+    PAIRS,
+    SINGLE,
+    SLOW_CASES,
+    outcome,
+    run_pairs,
+    sim_dataset,
+    sim_log,
+)
 
 from servotau.identification.workbench import MIN_GAIN, get_effect
 from servotau.simrobot.servo_config import EFFECT_PARAMS
@@ -26,10 +35,12 @@ RANK_MISSES: dict[str, str] = {}
 FALL_MISSES: dict[str, str] = {}
 
 
-def _param(effect, misses):
+def _param(effect, misses=()):
+    """``effect`` as a parameter: xfail where a documented miss, slow where its case is (SLOW_CASES)."""
+    marks = [pytest.mark.slow] if effect in SLOW_CASES else []
     if effect in misses:
-        return pytest.param(effect, marks=pytest.mark.xfail(strict=True, reason=misses[effect]))
-    return effect
+        marks.append(pytest.mark.xfail(strict=True, reason=misses[effect]))
+    return pytest.param(effect, marks=marks)
 
 
 def _confusable(a: str, b: str) -> bool:
@@ -101,11 +112,11 @@ def test_the_default_servo_effects_are_found_from_the_papers_model():
     assert o["fall"] >= BAR
 
 
-@pytest.mark.parametrize("pair", PAIRS, ids=["+".join(p) for p in PAIRS])
+@pytest.mark.parametrize("pair", [_param("+".join(p)) for p in PAIRS])
 def test_pairs_are_found_by_the_greedy_ladder(pair):
     """Two hidden effects together: the greedy ladder adds both, then finds nothing missing."""
-    o = outcome("+".join(pair))
-    assert set(pair) <= set(o["added"]), (o["added"], o["ranks"])
+    o = outcome(pair)
+    assert set(pair.split("+")) <= set(o["added"]), (o["added"], o["ranks"])
     assert o["fall"] >= BAR
     assert o["final_verdict"] != "missing_effect", o["final_message"]
 
@@ -130,6 +141,7 @@ def test_fast_motion_without_a_current_limit_is_not_saturation():
         assert gains["saturation"] < MIN_GAIN, (name, gains["saturation"])
 
 
+@pytest.mark.slow
 def test_a_link_side_angle_separates_backlash_from_elastic():
     """The documented experiment of the pair: with a link-side angle, the gear deflection of a gear with play
     steps by half the play at zero torque (named, coefficient within 25 % of it); an elastic gear's does not,
