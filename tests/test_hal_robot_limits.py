@@ -146,3 +146,20 @@ def test_an_unknown_joint_in_the_limits_is_a_one_line_error_before_serving(capsy
     err = capsys.readouterr().err
     assert code == 2 and 'safety.joints.NOPE: "NOPE" is not a joint of fake: expected one of' in err, err
     assert "Traceback" not in err
+
+
+def test_the_watchdog_options_fill_their_lock_step_twins_only_when_these_are_not_given():
+    """--hold-after sets lockstep_hold_after too, unless --lockstep-hold-after or --safety gives it."""
+    import argparse
+
+    from servotau.hal.robot.cli import _safety_of
+
+    def safety(hold_after=None, lockstep_hold_after=None, extra="{}"):
+        return _safety_of(argparse.Namespace(hold_after=hold_after, servo_off_after=None, safety=extra,
+                                             lockstep_hold_after=lockstep_hold_after, lockstep_servo_off_after=None))
+
+    assert safety(hold_after=0.05).lockstep_hold_after == 0.05
+    assert safety(hold_after=0.05, lockstep_hold_after=0.2).lockstep_hold_after == 0.2
+    s = safety(hold_after=0.05, extra='{"lockstep_hold_after": 0.3}')
+    assert (s.hold_after, s.lockstep_hold_after) == (0.05, 0.3)
+

@@ -122,6 +122,21 @@ def test_realtime_rejects_replays_old_commands_and_bad_headers(tmp_path):
     assert st["commands_accepted"] == 1 and st["state"] == "HOLDING" and "no fresh command" in st["hold_reason"]
 
 
+def test_a_frozen_lockstep_robot_cuts_its_servos_after_lockstep_servo_off_after(tmp_path):
+    """Lock-step, a hung controller (connected, silent) and lockstep_servo_off_after = 0.3 s set: the robot holds
+    frozen, then cuts its servos once that much wall time has passed without a command (latched SERVO_OFF)."""
+    port = free_port()
+    with robot_server(tmp_path, port, lockstep_hold_after=0.05, lockstep_servo_off_after=0.3) as server:
+        with ZenohBackend("fake", connect=[endpoint(port)], frame_timeout=FRAME_TIMEOUT, truth=False) as b:
+            for _ in range(20):
+                b.read()
+                b.write({})
+            held = robot_status(port, lambda st: st["state"] == "HOLDING")
+            off = robot_status(port, lambda st: st["state"] == "SERVO_OFF")
+        assert server.poll() is None
+    assert held["lockstep_frozen"] and off["trips"] == 1, (held, off)
+
+
 def test_hung_controller_in_lockstep_holds_and_a_fresh_command_resumes(tmp_path):
     """Lock-step with the shipped watchdog (35 ms of wall time): a controller that stops commanding but stays
     connected (hung, its liveliness token still there) makes the robot hold without stepping (simulated time

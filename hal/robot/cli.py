@@ -22,16 +22,19 @@ from .server import serve
 
 
 def _safety_of(a) -> SafetyConfig:
-    """[hal.safety] from ``--safety`` (JSON) and the watchdog options, which override it."""
-    given = {"hold_after": a.hold_after, "servo_off_after": a.servo_off_after,
-             "lockstep_hold_after": a.lockstep_hold_after or a.hold_after,
-             "lockstep_servo_off_after": a.lockstep_servo_off_after or a.servo_off_after}
+    """[hal.safety] from ``--safety`` (JSON) and the watchdog options, which override it. ``--hold-after`` and
+    ``--servo-off-after`` also set their lock-step twins unless those are given (as options or in ``--safety``)."""
     try:
         extra = json.loads(a.safety)
     except ValueError as exc:
         raise HalError(f"--safety {a.safety!r}: expected a JSON object of [hal.safety] settings ({exc})") from None
     if not isinstance(extra, dict):
         raise HalError(f"--safety {a.safety!r}: expected a JSON object of [hal.safety] settings")
+    given = {"hold_after": a.hold_after, "servo_off_after": a.servo_off_after,
+             "lockstep_hold_after": a.lockstep_hold_after, "lockstep_servo_off_after": a.lockstep_servo_off_after}
+    for twin, value in (("lockstep_hold_after", a.hold_after), ("lockstep_servo_off_after", a.servo_off_after)):
+        if given[twin] is None and twin not in extra:
+            given[twin] = value
     return SafetyConfig.from_section(
         Section({**extra, **{k: v for k, v in given.items() if v is not None}}, "--safety", ""))
 

@@ -192,9 +192,8 @@ class Firmware:
         age = now - self._t_cmd
         if not self.watchdog(now) and self.state != FirmwareState.RUNNING and self._q_hold is None:
             self._q_hold = self._q_valid.copy()
-        off_after = self.safety.servo_off_after
-        if self.state == FirmwareState.HOLDING and off_after is not None and age > off_after:
-            return self._trip(f"no fresh command for {age:.3f} s (servo_off_after = {off_after} s)")
+        if self.servo_off_due(now):
+            return self._trip(f"no fresh command for {age:.3f} s (servo_off_after = {self.safety.servo_off_after} s)")
         running = self.state == FirmwareState.RUNNING
         target = self._q_cmd if running else self._q_hold
         if not np.isfinite(target).all():
@@ -217,6 +216,12 @@ class Firmware:
             return self._trip(f'|q_des - q| = {err[i]:.4f} rad on joint "{self.info.joint_names[i]}": '
                               f"expected <= {self.max_error} rad")
         return out
+
+    def servo_off_due(self, now: float) -> bool:
+        """HOLDING without a fresh command for longer than ``servo_off_after`` (if set) at ``now`` [s]: the next
+        :meth:`output` cuts the servos."""
+        off_after = self.safety.servo_off_after
+        return self.state == FirmwareState.HOLDING and off_after is not None and now - self._t_cmd > off_after
 
     def watchdog(self, now: float) -> bool:
         """RUNNING without a fresh command for ``hold_after`` at ``now`` [s] (or with the controller lost):

@@ -349,14 +349,15 @@ class RobotServer:
         makes the robot hold *without stepping*: simulated time stands still, so nothing moves, and the frame is
         republished flagged HOLDING; the command answering it resumes exactly where the run was (a stall changes
         nothing in the log). Once the controller is lost, or for any other hold, the robot steps one tick per
-        period of wall time, holding."""
+        period of wall time, holding (so does a frozen robot once ``lockstep_servo_off_after`` is due: its next
+        tick cuts the servos)."""
         period, safety, fw = self.info.period, self.firmware.safety, self.firmware
         with self._cond:
             while not self._stop.is_set():
                 now = time.monotonic()
                 state = fw.state
-                if self._frozen and (state != FirmwareState.HOLDING or self._controller_lost):
-                    self._frozen = False  # resumed by a command, or the controller is gone: step on
+                if self._frozen and (state != FirmwareState.HOLDING or self._controller_lost or fw.servo_off_due(now)):
+                    self._frozen = False  # resumed by a command, the controller is gone, or servo_off_after: step on
                 if state != FirmwareState.RUNNING:
                     self._controller_lost = False  # nothing to hold
                 if state == FirmwareState.RUNNING:
