@@ -6,6 +6,8 @@ re-exports every name of this module.
 
 from __future__ import annotations
 
+import logging
+import sys
 import types
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -139,3 +141,46 @@ class ConfigFiles:
         where = f"{self.folder}, then the packaged defaults" if self.folder is not None else "the packaged defaults"
         given = "".join(f", {name} = {p}" for name, p in self.given.items())
         return f"config folder: {where} ({self.defaults}){given}"
+
+
+class LoadedFiles(logging.Filter):
+    """Passes each ``config: FILE (...)`` line of the ``servotau.config`` logger once per process (a file read by
+    several modules is named once)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: set[str] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.name != "servotau.config":
+            return True
+        message = record.getMessage()
+        if message in self.seen:
+            return False
+        self.seen.add(message)
+        return True
+
+
+class _Stderr(logging.Handler):
+    """Writes to the ``sys.stderr`` of the moment (a test's capture as well as the terminal)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        print(self.format(record), file=sys.stderr, flush=True)
+
+
+def show_loaded_files() -> None:
+    """Name every config file read on stderr, once each (the ``servotau.config`` logger at INFO, whatever the root
+    logger's level). Called by each command's entry point; a second call (a second command run in the same
+    process) names the files again."""
+    logger = logging.getLogger("servotau.config")
+    for h in logger.handlers:
+        if isinstance(h, _Stderr):
+            for f in h.filters:
+                if isinstance(f, LoadedFiles):
+                    f.seen.clear()
+            return
+    handler = _Stderr()
+    handler.addFilter(LoadedFiles())
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
