@@ -68,7 +68,7 @@ def load_toml(path: str | Path, relative_to: str | Path | None = None) -> Sectio
         raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: cannot be read: {exc}") from exc
-    log.info("config: read %s (%s)", p.resolve(), describe_origin(p))
+    log.info("config: read %s%s", p.resolve(), describe_origin(p))
     return Section(data, str(p), "")
 
 

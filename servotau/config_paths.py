@@ -39,12 +39,8 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def describe_origin(p: Path) -> str:
-    """Where ``p`` comes from, for the loaded-files lines."""
-    try:
-        p.resolve().relative_to(CONFIG_DIR.resolve())
-        return "packaged default"
-    except ValueError:
-        return "given"
+    """`` (packaged default)`` for a file of the packaged defaults, else nothing (for the loaded-files lines)."""
+    return " (packaged default)" if p.resolve().is_relative_to(CONFIG_DIR.resolve()) else ""
 
 
 def resolve_config_path(path: str | Path, relative_to: str | Path | None = None) -> Path:
