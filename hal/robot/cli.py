@@ -22,6 +22,11 @@ from .firmware import SafetyConfig
 from .server import serve
 
 
+EXIT_CODES = """exit codes:
+  0    served, then stopped (SIGINT, SIGTERM or --max-ticks); the server's status is printed as JSON
+  2    error: a bad option, config file or setting (the message names it), before the robot moves"""
+
+
 def _safety_of(a) -> SafetyConfig:
     """[hal.safety] from ``--safety`` (JSON) and the watchdog options, which override it."""
     given = {"hold_after": a.hold_after, "servo_off_after": a.servo_off_after,
@@ -39,7 +44,8 @@ def _safety_of(a) -> SafetyConfig:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m servotau.hal``: serve a robot built from an import string."""
-    p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0].replace("``", ""),
+                                epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", required=True, help="robot factory, 'module:callable'")
     p.add_argument("--config", metavar="DIR", help="config folder: --scenario and --security name files of DIR (else "
                                                    "of the packaged defaults), not of the working folder")
