@@ -112,6 +112,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
+    if command is None and "--version" in argv:  # without importing every command
+        print(f"servotau {version()}")
+        return 0
     parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
     level = logging.DEBUG if args.verbose else logging.INFO

@@ -65,7 +65,8 @@ def test_every_help_is_plain_text_and_lists_the_exit_codes():
 def test_plain_text_removes_rest_markup():
     from servotau.cli import plain_text
 
-    text = plain_text("Usage::\n\n    run ``x``\n::\n\nSee :class:`~servotau.hal.Backend` and :func:`a.b` and **c** `d`.")
+    text = plain_text("Usage::\n\n    run ``x``\n::\n\n"
+                      "See :class:`~servotau.hal.Backend` and :func:`a.b` and **c** `d`.")
     assert text == "Usage:\n\n    run x\n\nSee Backend and a.b and c d."
 
 

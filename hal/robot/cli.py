@@ -21,7 +21,6 @@ from .config import CLOCKS, MODES, ServerConfig
 from .firmware import SafetyConfig
 from .server import serve
 
-
 EXIT_CODES = """exit codes:
   0    served, then stopped (SIGINT, SIGTERM or --max-ticks); the server's status is printed as JSON
   2    error: a bad option, config file or setting (the message names it), before the robot moves"""
