@@ -80,7 +80,8 @@ class ConfigFiles:
 
     Args:
         folder: The config folder (``--config DIR``), or None: the packaged defaults alone.
-        given: File name (``"control.toml"``) -> the path given by that file's own flag.
+        given: File name (``"control.toml"``) -> the path given by that file's own flag (as given; a relative path
+            that is not there but names a packaged default is that default).
         defaults: The packaged default folder.
     """
 
@@ -100,8 +101,8 @@ class ConfigFiles:
         if folder is not None:
             folder = Path(folder)
             if not folder.exists():
-                raise ConfigError(f"--config {folder}: no such folder: expected a config folder (servotau config "
-                                  "init DIR writes one)")
+                raise ConfigError(f"--config {folder}: config folder not found: expected a config folder "
+                                  "(servotau config init DIR writes one)")
             if not folder.is_dir():
                 raise ConfigError(f"--config {folder}: not a folder: expected a config folder holding "
                                   "control.toml, hal.toml, ... (servotau config init DIR writes one)")
@@ -110,8 +111,10 @@ class ConfigFiles:
             if path is None:
                 continue
             p = Path(path)
+            if not p.exists() and not p.is_absolute() and (CONFIG_DIR / p).is_file():
+                p = CONFIG_DIR / p  # a packaged default named by its name (--sim-config sim_identification.toml)
             if not p.exists():
-                raise ConfigError(f"{flag} {p}: no such file: expected a TOML config file ({name})")
+                raise ConfigError(f"{flag} {p}: config file not found: expected a TOML config file ({name})")
             if not p.is_file():
                 raise ConfigError(f"{flag} {p}: not a file: expected a TOML config file ({name})")
             files[name] = p

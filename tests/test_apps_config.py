@@ -102,16 +102,17 @@ def test_nothing_is_read_from_the_working_folder(tmp_path, monkeypatch, capsys):
 def test_a_missing_config_folder_is_a_clear_error_before_anything_starts(tmp_path, monkeypatch, capsys, argv):
     monkeypatch.chdir(tmp_path)
     assert main([*argv, "--config", "nowhere"]) == 2
-    assert "--config nowhere: no such folder: expected a config folder" in capsys.readouterr().err
+    assert "--config nowhere: config folder not found: expected a config folder" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []  # nothing written (demo's output folder included)
 
 
 def test_a_missing_file_flag_is_a_clear_error(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["sim", "--sim-config", "nope.toml"]) == 2
-    assert "--sim-config nope.toml: no such file: expected a TOML config file (sim.toml)" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--sim-config nope.toml: config file not found: expected a TOML config file (sim.toml)" in err
     assert main(["identify", "fit", "log.parquet", "--estimation-config", "e.toml"]) == 2
-    assert "--estimation-config e.toml: no such file" in capsys.readouterr().err
+    assert "--estimation-config e.toml: config file not found" in capsys.readouterr().err
 
 
 def test_the_hal_module_takes_a_config_folder(tmp_path, capsys):

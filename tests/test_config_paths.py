@@ -75,15 +75,18 @@ def test_config_files_choose_the_flag_then_the_folder_then_the_default(tmp_path,
     assert files.path("control.toml") == CONFIG_DIR / "control.toml"
     assert files.path("estimation.toml") == tmp_path / "mine.toml"
     assert "cfg, then the packaged defaults" in files.describe() and "estimation.toml = mine.toml" in files.describe()
+    # a flag naming a packaged default by its name, not in the working folder: that default
+    named = ConfigFiles.create(None, {"sim.toml": ("--sim-config", "sim_identification.toml")})
+    assert named.path("sim.toml") == CONFIG_DIR / "sim_identification.toml"
     with pytest.raises(ConfigError, match="nothing.toml: config file not found"):
         files.path("nothing.toml")
 
 
 @pytest.mark.parametrize("folder, given, message", [
-    ("missing", {}, "--config missing: no such folder: expected a config folder"),
+    ("missing", {}, "--config missing: config folder not found: expected a config folder"),
     ("file.toml", {}, "--config file.toml: not a folder: expected a config folder"),
     (None, {"control.toml": ("--control-config", "missing.toml")},
-     r"--control-config missing.toml: no such file: expected a TOML config file \(control.toml\)"),
+     r"--control-config missing.toml: config file not found: expected a TOML config file \(control.toml\)"),
     (None, {"control.toml": ("--control-config", ".")}, r"--control-config \.: not a file"),
 ])
 def test_bad_folder_or_file_flags_are_clear_errors(tmp_path, monkeypatch, folder, given, message):

@@ -32,8 +32,9 @@ def main(args) -> int:
     from servotau.hal.robot.server import serve
     from servotau.simrobot.sim import SimConfig, SimRobot
 
-    if args.config and Path(args.config).is_file() and args.sim_config is None:  # the flag's former meaning
-        print(f"servotau sim: --config {args.config} is a file: read as --sim-config (--config names a config "
+    if args.config and args.sim_config is None and (Path(args.config).is_file() or args.config.endswith(".toml")):
+        # the flag's former meaning: the sim file
+        print(f"servotau sim: --config {args.config} names a file: read as --sim-config (--config names a config "
               "folder)", file=sys.stderr)
         args = argparse.Namespace(**{**vars(args), "sim_config": args.config, "config": None})
     files = config_files(args, SIM, HAL)
