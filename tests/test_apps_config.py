@@ -113,6 +113,10 @@ def test_a_missing_file_flag_is_a_clear_error(tmp_path, monkeypatch, capsys):
     assert "--sim-config nope.toml: config file not found: expected a TOML config file (sim.toml)" in err
     assert main(["identify", "fit", "log.parquet", "--estimation-config", "e.toml"]) == 2
     assert "--estimation-config e.toml: config file not found" in capsys.readouterr().err
+    assert main(["sim", "--config", "old.toml"]) == 2  # the former meaning of sim's --config: the sim file
+    err = capsys.readouterr().err
+    assert "--config old.toml names a file: read as --sim-config" in err
+    assert "--sim-config old.toml: config file not found" in err
 
 
 def test_the_hal_module_takes_a_config_folder(tmp_path, capsys):

@@ -74,8 +74,12 @@ def test_version(capsys):
     """`servotau --version` prints the installed distribution's version."""
     from importlib import metadata
 
-    with pytest.raises(SystemExit) as exc:
-        main(["--version"])
+    assert main(["--version"]) == 0  # without importing the commands
+    assert capsys.readouterr().out == f"servotau {metadata.version('servotau')}\n"
+    from servotau.cli import build_parser
+
+    with pytest.raises(SystemExit) as exc:  # the parser's own --version (the one --help lists)
+        build_parser("sim").parse_args(["--version"])
     assert exc.value.code == 0
     assert capsys.readouterr().out == f"servotau {metadata.version('servotau')}\n"
 

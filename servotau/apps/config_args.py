@@ -4,7 +4,7 @@ Rule (README.md, "Configuration"): a file given by its own flag (``--control-con
 it comes from the ``--config DIR`` folder; else from the packaged defaults (:data:`servotau.config.CONFIG_DIR`).
 A file the program chooses is never looked up in the working folder. A path inside a config file is looked up
 next to that file, then among the packaged defaults. Every file read is named on stderr, once, by
-:func:`show_loaded_files` (the ``servotau.config`` logger's lines).
+:func:`servotau.config_paths.show_loaded_files` (the ``servotau.config`` logger's lines, shown by the entry points).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from servotau.config import ConfigFiles, Section
-from servotau.config_paths import show_loaded_files as show_loaded_files  # the entry points call it
 
 CONFIG_HELP = ("config folder (e.g. from servotau config init DIR): each file not given by its own flag comes from "
                "DIR, else from the packaged defaults; never from the working folder")

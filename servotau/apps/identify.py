@@ -1,8 +1,9 @@
 """servotau identify: collect actuator-identification data on a robot, fit the motor parameters.
 
-    servotau identify collect --out runs/ident.parquet [--hal hal.toml --backend inprocess|zenoh --port N]
-                              [--plan identification.toml] [--joints RLEG_JOINT0,...] [--sim-config ...]
-    servotau identify fit runs/ident.parquet [--joints ...] [--loss asymmetric|least_squares] [--w 100]
+    servotau identify collect --out runs/ident.parquet [--config DIR] [--hal hal.toml]
+                              [--backend inprocess|zenoh --port N] [--plan identification.toml]
+                              [--joints RLEG_JOINT0,...] [--sim-config ...]
+    servotau identify fit runs/ident.parquet [--config DIR] [--joints ...] [--loss asymmetric|least_squares] [--w 100]
                           [--two-stage] [--out config/motors/identified.toml] [--json]
 
 collect plays the plan (settle, high-velocity sweeps, high-torque holds; paper section 3.4) on any
