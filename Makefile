@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test experiments bench clean
+.PHONY: venv demo test experiments bench wheel clean
 
 venv: $(STAMP)
 
@@ -29,5 +29,10 @@ experiments: $(STAMP)
 bench: $(STAMP)
 	@for b in bench/[!_]*.py; do echo "== $$b"; $(BIN)/python $$b --json || exit 1; done
 
+# The wheel (config and robot model inside) into dist/; install it anywhere with pip install dist/servotau-*.whl.
+wheel: $(STAMP)
+	rm -rf build/lib build/bdist.*  # no stale module from an earlier build
+	$(BIN)/python -m pip wheel --no-deps --no-build-isolation --wheel-dir dist .
+
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build dist *.egg-info

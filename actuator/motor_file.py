@@ -50,8 +50,7 @@ from servotau.errors import ConfigError, IdentificationError
 
 from .loss import LOSS_KINDS, Loss
 from .model import SERVO_ERROR, SERVO_UNIT, EffectTerm, FitMetrics, MotorModel
-from .toml_writer import key as toml_key
-from .toml_writer import value as toml_value
+from .toml_writer import dumps as toml_dumps
 
 FORMAT_VERSION = 1
 
@@ -98,48 +97,29 @@ class MotorParameters(Mapping[str, MotorModel]):
 
     def save_toml(self, path: str | Path) -> Path:
         """Write the file (format in the module docstring); return its path."""
-        lines = [
-            "# servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
-            "# Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
+        header = [
+            "servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
+            "Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
         ]
         if any(m.servo_issue() is not None for m in self.models.values()):  # a model for another use
-            lines.append("# A joint with 'target' and 'unit' U predicts that instead: k_tau [U/(N m)], "
-                         "k_v [U/(rad/s)], k_c, offset and rms [U]; a key left out is a term not in the model.")
-        lines.append(f"version = {FORMAT_VERSION}")
+            header.append("A joint with 'target' and 'unit' U predicts that instead: k_tau [U/(N m)], "
+                          "k_v [U/(rad/s)], k_c, offset and rms [U]; a key left out is a term not in the model.")
+        joints = {}
         for joint, m in self.models.items():
-            table = f"joints.{toml_key(joint)}"
-            lines += ["", f"[{table}]"]
-            if not m.is_servo_error:
-                lines += [f"target = {toml_value(m.target)}", f"unit = {toml_value(m.unit)}"]
-            if m.k_tau is not None:
-                lines.append(f"k_tau = {toml_value(m.k_tau)}")
-            lines.append(f"k_v = {toml_value(m.k_v)}")
-            if m.k_c is not None:
-                lines.append(f"k_c = {toml_value(m.k_c)}")
-            if m.offset is not None:
-                lines.append(f"offset = {toml_value(m.offset)}")
-            lines.append(f"loss = {toml_value(m.loss.kind)}")
-            if m.loss.w is not None:
-                lines.append(f"w = {toml_value(m.loss.w)}")
-            lines.append(f"provenance = {toml_value(m.provenance)}")
+            table: dict = {} if m.is_servo_error else {"target": m.target, "unit": m.unit}
+            optional = {"k_tau": m.k_tau, "k_v": m.k_v, "k_c": m.k_c, "offset": m.offset, "loss": m.loss.kind,
+                        "w": m.loss.w, "provenance": m.provenance}
+            table.update({k: v for k, v in optional.items() if v is not None})
             if m.metrics is not None:
-                lines += [
-                    "",
-                    f"[{table}.metrics]",
-                    f"rms = {toml_value(m.metrics.rms)}",
-                    f"overestimation_rate = {toml_value(m.metrics.overestimation_rate)}",
-                    f"n_samples = {toml_value(m.metrics.n_samples)}",
-                ]
-            for name, term in m.extra.items():
-                lines += [
-                    "",
-                    f"[{table}.extra.{toml_key(name)}]",
-                    f"coefficient = {toml_value(term.coefficient)}",
-                    f"shape = {toml_value(dict(term.shape))}",
-                ]
+                table["metrics"] = {"rms": m.metrics.rms, "overestimation_rate": m.metrics.overestimation_rate,
+                                    "n_samples": m.metrics.n_samples}
+            if m.extra:
+                table["extra"] = {name: {"coefficient": term.coefficient, "shape": dict(term.shape)}
+                                  for name, term in m.extra.items()}
+            joints[joint] = table
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        p.write_text(toml_dumps({"version": FORMAT_VERSION, "joints": joints}, header), encoding="utf-8")
         return p
 
     @classmethod

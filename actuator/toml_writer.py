@@ -1,47 +1,32 @@
-"""Just enough TOML writing for the motor file (:mod:`.motor_file`; tomllib reads, the stdlib does not write).
+"""TOML text for the motor file (:mod:`.motor_file`): tomllib reads TOML, tomli-w writes it.
 
-Values: finite floats (``repr`` round-trips exactly), ints, bools, strings and inline tables of those.
+Adds what tomli-w leaves to the caller: comment lines at the top, and the refusal of NaN and infinity (TOML
+can write them, a motor parameter must never be one).
 """
 
 from __future__ import annotations
 
 import math
-import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
-_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
-
-
-def key(name: str) -> str:
-    """A TOML key: bare if possible, else a quoted basic string."""
-    return name if _BARE_KEY.match(name) else string(name)
+import tomli_w
 
 
-def string(text: str) -> str:
-    """A TOML basic string, with quotes, backslashes and control characters escaped."""
-    out = []
-    for ch in text:
-        if ch in ('"', "\\"):
-            out.append("\\" + ch)
-        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
-            out.append(f"\\u{ord(ch):04X}")
-        else:
-            out.append(ch)
-    return '"' + "".join(out) + '"'
+def dumps(data: Mapping[str, object], header: Sequence[str] = ()) -> str:
+    """``data`` as TOML text (tables for nested mappings), after ``header``'s lines as ``# `` comments.
+
+    Raises:
+        ValueError: A float of ``data`` is NaN or infinite (naming its dotted key).
+        TypeError: A value TOML cannot hold.
+    """
+    _check_finite(data, "")
+    return "".join(f"# {line}\n" for line in header) + tomli_w.dumps(data)
 
 
-def value(v: object) -> str:
-    """A TOML value for a bool, int, finite float, string or mapping (inline table)."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        if not math.isfinite(v):
-            raise ValueError(f"cannot write non-finite float {v!r} to the motor-parameter file")
-        return repr(v)
-    if isinstance(v, str):
-        return string(v)
-    if isinstance(v, Mapping):
-        return "{ " + ", ".join(f"{key(k)} = {value(x)}" for k, x in v.items()) + " }" if v else "{}"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+def _check_finite(data: Mapping[str, object], prefix: str) -> None:
+    for k, v in data.items():
+        name = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            _check_finite(v, name + ".")
+        elif isinstance(v, float) and not math.isfinite(v):
+            raise ValueError(f"cannot write non-finite float {name} = {v!r} to the motor-parameter file")

@@ -247,7 +247,7 @@ class ControlConfig:
             raise root.error("version", version, f"{FORMAT_VERSION}")
         motors_path = root.str("motors")
         try:
-            motors_file = resolve_config_path(motors_path)
+            motors_file = resolve_config_path(motors_path, root.file)
             params = MotorParameters.load_toml(motors_file)
             motors = dict(params.models)
         except ConfigError as err:

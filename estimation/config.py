@@ -115,7 +115,7 @@ def _prediction(pred: Section) -> PredictionSettings:
         return load_dataclass(PredictionSettings, pred)
     path = pred.str("motors")
     try:
-        motors = MotorParameters.load_toml(resolve_config_path(path))
+        motors = MotorParameters.load_toml(resolve_config_path(path, pred.file))
     except (ConfigError, IdentificationError) as err:
         raise ConfigError(f"{pred.file}: field 'prediction.motors' = {path!r}: {err}") from err
     joints = pred.data.get("joints", list(motors))

@@ -5,11 +5,27 @@ path, so that every error names the file, the field and the expected value::
 
     ConfigError: config/servo.toml: field 'joints.RLEG_JOINT3.kp' = -5.0: expected a finite
     number > 0 [N m/rad]
+
+Where files are found (docs in README.md, "Configuration"):
+
+- The defaults ship inside the package (``servotau.defaults``: the repository's ``config/`` folder),
+  found through importlib.resources: :data:`CONFIG_DIR`.
+- A process reads the files of its config folder (``--config DIR``; :class:`ConfigFiles`): each file from
+  its own flag if given, else from DIR, else the packaged default. A name the program chooses is never
+  looked up in the working folder.
+- A relative path written inside a config file (``motors = "motors/x.toml"``) is looked up next to that
+  file, then among the packaged defaults (:func:`resolve_config_path` with ``relative_to``).
+- A path given explicitly (a command-line flag, a caller's argument) is read as given; a relative one
+  that does not exist there is looked up among the packaged defaults (``load_toml("control.toml")``).
+
+Every file read is logged once at INFO on the ``servotau.config`` logger (the processes print it on
+stderr), so no file is read silently.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import numbers
 import sys
@@ -21,35 +37,38 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+from .config_paths import CONFIG_DIR, DEFAULTS_PACKAGE, REPO_ROOT, ConfigFiles, default_config_dir, describe_origin
+from .config_paths import resolve_config_path as resolve_config_path
 from .errors import ConfigError, ServotauError
+
+__all__ = ["CONFIG_DIR", "DEFAULTS_PACKAGE", "REPO_ROOT", "ConfigFiles", "Section", "check_settings",
+           "default_config_dir", "load_dataclass", "load_toml", "read_setting", "resolve_config_path", "setting"]
 
 T = TypeVar("T")
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-CONFIG_DIR = REPO_ROOT / "config"
+log = logging.getLogger(__name__)
 
 _MISSING = object()
 
 
-def resolve_config_path(path: str | Path) -> Path:
-    """Find a config file: as given, else relative to the repository's ``config/`` folder."""
-    p = Path(path)
-    if p.exists():
-        return p
-    alt = CONFIG_DIR / p
-    if alt.exists():
-        return alt
-    raise ConfigError(f"{path}: config file not found (looked in . and {CONFIG_DIR})")
+def load_toml(path: str | Path, relative_to: str | Path | None = None) -> Section:
+    """Parse a TOML file (found by :func:`resolve_config_path`) and return its root :class:`Section`; logs the
+    file once at INFO on this module's logger.
 
-
-def load_toml(path: str | Path) -> Section:
-    """Parse a TOML file and return its root :class:`Section`."""
-    p = resolve_config_path(path)
+    Raises:
+        ConfigError: The file is missing, not a file, or not valid TOML (naming it).
+    """
+    p = resolve_config_path(path, relative_to)
+    if p.is_dir():
+        raise ConfigError(f"{p}: a folder: expected a TOML config file")
     try:
         with open(p, "rb") as f:
             data = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: cannot be read: {exc}") from exc
+    log.info("config: read %s%s", p.resolve(), describe_origin(p))
     return Section(data, str(p), "")
 
 

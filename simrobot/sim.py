@@ -53,10 +53,10 @@ class SimConfig:
         ``seed`` and ``effects``."""
         root = load_toml(path)
         files = {"servo": "servo_path", "sensors": "sensors"}
-        given = {field_: resolve_config_path(root.str(key)) for key, field_ in files.items() if key in root}
+        given = {field_: resolve_config_path(root.str(key), root.file) for key, field_ in files.items() if key in root}
         if "sensors" in given:
             given["sensors"] = SensorConfig.from_toml(given["sensors"])
-        scenario = Scenario.from_toml(resolve_config_path(root.str("scenario", DEFAULT_SCENARIO)))
+        scenario = Scenario.from_toml(resolve_config_path(root.str("scenario", DEFAULT_SCENARIO), root.file))
         return load_dataclass(cls, root, ignore=["scenario", *files, "effects"], scenario=scenario,
                               effects=dict(root.section("effects", {}).data) or None, **given)
 

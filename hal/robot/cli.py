@@ -8,7 +8,8 @@ import logging
 import sys
 from pathlib import Path
 
-from servotau.config import Section
+from servotau.config import ConfigFiles, Section
+from servotau.config_paths import show_loaded_files
 from servotau.errors import ServotauError
 
 from ..config import import_object
@@ -19,6 +20,10 @@ from ..wire.session import DEFAULT_ENDPOINT
 from .config import CLOCKS, MODES, ServerConfig
 from .firmware import SafetyConfig
 from .server import serve
+
+EXIT_CODES = """exit codes:
+  0    served, then stopped (SIGINT, SIGTERM or --max-ticks); the server's status is printed as JSON
+  2    error: a bad option, config file or setting (the message names it), before the robot moves"""
 
 
 def _safety_of(a) -> SafetyConfig:
@@ -41,8 +46,11 @@ def _safety_of(a) -> SafetyConfig:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m servotau.hal``: serve a robot built from an import string."""
-    p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m servotau.hal", description=__doc__.split("\n")[0].replace("``", ""),
+                                epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", required=True, help="robot factory, 'module:callable'")
+    p.add_argument("--config", metavar="DIR", help="config folder: --scenario and --security name files of DIR (else "
+                                                   "of the packaged defaults), not of the working folder")
     p.add_argument("--scenario", help="scenario config path passed to the factory")
     p.add_argument("--kwargs", default="{}", help="JSON object of keyword arguments for the factory")
     p.add_argument("--name", help="robot name in the keys (default: RobotInfo.name)")
@@ -69,7 +77,13 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
     listen = a.listen if a.listen is not None else ([] if a.connect else [DEFAULT_ENDPOINT])
+    show_loaded_files()
     try:  # before anything is built or served: a bad file or field is a one-line error
+        if a.config is not None:  # the files named on the command line come from the config folder
+            files = ConfigFiles.create(a.config)
+            print(files.describe(), file=sys.stderr, flush=True)
+            a.scenario = str(files.path(a.scenario)) if a.scenario else None
+            a.security = str(files.path(a.security)) if a.security else None
         security = security_from_section(hal_section(a.security).section("server", {}), robot_side=True) \
             if a.security else Security()
         check_endpoints(security, [*listen, *a.connect], robot_side=True)

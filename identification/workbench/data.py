@@ -133,6 +133,7 @@ def load_dataset(
     min_samples: int = MIN_SAMPLES,
     smooth_torque_s: float | None = None,
     dq_window: int | None = None,
+    estimator_config=None,
 ) -> Dataset:
     """Read a log (file path, pyarrow Table or mapping of columns) into a :class:`Dataset`.
 
@@ -146,6 +147,8 @@ def load_dataset(
             any term that averages neighbouring samples (a lag, a delay) would win by denoising it.
         dq_window: SG window [samples, odd] of the velocity when the log has no velocity column (None:
             chosen from the encoder by :func:`cv_window`).
+        estimator_config: The off-line estimator's :class:`~servotau.estimation.EstimatorConfig` for a servotau
+            log without an estimate (default: the packaged estimation.toml).
 
     Raises:
         IdentificationError: Missing or unknown column, unknown joint, too few samples, time not
@@ -155,7 +158,7 @@ def load_dataset(
     if isinstance(source, (str, Path)):
         columns = read_table(source)
         name = str(source)
-        columns, estimated = _with_estimates(Path(source), columns, joint, roles)
+        columns, estimated = _with_estimates(Path(source), columns, joint, roles, estimator_config)
     else:
         estimated = None
         columns = table_columns(source)
@@ -278,7 +281,7 @@ def windows_text(windows: list[int]) -> str:
 
 
 def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | None,
-                    roles: Mapping[str, str] | None) -> tuple[dict[str, np.ndarray], str | None]:
+                    roles: Mapping[str, str] | None, estimator_config=None) -> tuple[dict[str, np.ndarray], str | None]:
     """``columns`` plus ``est/tau/<joint>`` and ``est/dq/<joint>`` from the off-line estimator, for a
     servotau Parquet log that has sensors but no estimate of the joint (module doc, layout 2); and a
     note saying so (None when nothing was added)."""
@@ -292,7 +295,7 @@ def _with_estimates(path: Path, columns: dict[str, np.ndarray], joint: str | Non
     from ..data import load_aligned
 
     log.info("%s: no est/tau/%s: estimating it off-line from the sensors", path, joint)
-    s = load_aligned(path, [joint]).samples[joint]
+    s = load_aligned(path, [joint], estimator_config=estimator_config).samples[joint]
     note = (f"est/tau/{joint}, est/dq/{joint}: {OFFLINE_ESTIMATE} (identification/data/aligned.py, as "
             "`servotau identify fit`), not the simulator's ground truth")
     return {**columns, f"est/tau/{joint}": s.tau, f"est/dq/{joint}": s.dq}, note

@@ -28,6 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from servotau.apps.config_args import (
+    CONTROL,
+    ESTIMATION,
+    HAL,
+    add_config_args,
+    config_files,
+    controller_parts,
+    hal_config,
+)
 from servotau.apps.viewer import RerunStream, open_recording
 from servotau.control.loop import ControlLoop, LoopHook, Tick
 from servotau.control.operator import OperatorChannel
@@ -130,7 +139,7 @@ class _TripNotice(LoopHook):
 # -- the session ----------------------------------------------------------------------------------------
 def register(sub) -> None:
     p = sub.add_parser("control", help="run the controller on a HAL backend (sim or real robot)")
-    p.add_argument("--hal", default="hal.toml", help="HAL config: [hal] backend = zenoh | inprocess | replay")
+    add_config_args(p, HAL, CONTROL, ESTIMATION)
     p.add_argument("--backend", choices=("zenoh", "inprocess", "replay"), help="override the config's backend")
     p.add_argument("--port", type=int, help="zenoh: the robot's port on 127.0.0.1 (overrides the config)")
     p.add_argument("--mode", choices=("position", "torque"), default="position")
@@ -148,7 +157,7 @@ def register(sub) -> None:
 
 def run_session(backend, *, mode: str, duration: float, stream: RerunStream | None = None, writer=None,
                 progress=print, operator: OperatorChannel | None = None, hold_timeout: float | None = 0.0,
-                hint: str = "", trip_at: float | None = None) -> SessionResult:
+                hint: str = "", trip_at: float | None = None, manager=None, estimator=None) -> SessionResult:
     """Settle, then swing the right leg in ``mode`` (:class:`~servotau.control.loop.ControlLoop`).
 
     Args:
@@ -163,6 +172,7 @@ def run_session(backend, *, mode: str, duration: float, stream: RerunStream | No
         hint: What the operator can do, printed with a trip.
         trip_at: [s] fault injection: the reference of :data:`TRIP_JOINT` jumps by :data:`TRIP_JUMP` from this
             robot time after the settle phase on (a command_error trip), or None.
+        manager, estimator: The controller and the torque estimator (default: the packaged config).
     """
     info = backend.info
     error = TrackingError(info.nq)
@@ -171,7 +181,7 @@ def run_session(backend, *, mode: str, duration: float, stream: RerunStream | No
         hooks.append(LogHook(writer))
     if stream is not None:
         hooks.append(RerunHook(stream, info.ft_sensor_names))
-    loop = ControlLoop(backend, mode=mode, hooks=hooks)
+    loop = ControlLoop(backend, manager, estimator, mode=mode, hooks=hooks)
     traj = right_leg_swing(info.joint_names, loop.start().q, duration)
     jump = np.zeros(info.nq)
     jump[info.joint_names.index(TRIP_JOINT)] = TRIP_JUMP
@@ -247,7 +257,8 @@ def main(args) -> int:
     if args.hold_timeout is not None and not args.hold_timeout >= 0:
         raise ControlError(f"--hold-timeout {args.hold_timeout}: expected >= 0 [s]")
     threads_before = {t.ident for t in threading.enumerate()}
-    backend = open_backend(args.hal, **overrides_from_args(args))
+    files = config_files(args, HAL, CONTROL, ESTIMATION)
+    backend = open_backend(hal_config(files), **overrides_from_args(args))
     operator = OperatorChannel()
     writer = stream = None
     old_term = signal.signal(signal.SIGTERM, lambda *_: operator.post("release")) \
@@ -263,7 +274,8 @@ def main(args) -> int:
         writer = LogWriter(args.log, backend.info, metadata={"mode": args.mode},
                            realtime=_on_wall_clock(backend)) if args.log else None
         result = run_session(backend, mode=args.mode, duration=args.duration, stream=stream, writer=writer,
-                             operator=operator, hold_timeout=args.hold_timeout, hint=hint, trip_at=args.trip_at)
+                             operator=operator, hold_timeout=args.hold_timeout, hint=hint, trip_at=args.trip_at,
+                             **controller_parts(files, backend.info))
     except HalError as exc:
         print(f"servotau control: robot lost: {exc}", file=sys.stderr)
         return 4

@@ -23,6 +23,7 @@ import argparse
 import json
 import sys
 
+from servotau.apps.config_args import HAL, add_config_args, config_files
 from servotau.control.operator import ACTIONS
 from servotau.errors import HalError, ServotauError
 
@@ -33,7 +34,7 @@ def register(sub) -> None:
     p = sub.add_parser("ctl", help="operator commands to a running controller: reset, release, status",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("action", choices=ACTIONS)
-    p.add_argument("--hal", default="hal.toml", help="HAL config: [hal.zenoh] robot and connect are the defaults")
+    add_config_args(p, HAL)  # [hal.zenoh] robot and connect are the defaults
     p.add_argument("--robot", help="robot name in the keys (default: [hal.zenoh] robot)")
     p.add_argument("--connect", action="append", help="zenoh endpoint of the robot process or a router "
                                                       "(default: [hal.zenoh] connect)")
@@ -93,7 +94,7 @@ def _defaults(args):
     from servotau.hal.registry import hal_section
     from servotau.hal.wire.security import check_endpoints, security_from_section
 
-    z = hal_section(args.hal).section("zenoh", {})
+    z = hal_section(config_files(args, HAL).path(HAL.name)).section("zenoh", {})
     robot = args.robot or z.str("robot", "hrp2")
     security = security_from_section(z, robot_side=False)
     if args.port is not None:

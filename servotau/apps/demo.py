@@ -13,6 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from servotau.apps.config_args import CONTROL, ESTIMATION, HAL, SIM, add_config_args, config_files, forward
 from servotau.apps.processes import free_port, stop_process, wait_ready
 
 HOLD_TIMEOUT = 2.0  # [s] robot time the controller holds after a safety trip before it releases (exit code 3)
@@ -25,10 +26,12 @@ def register(sub) -> None:
     p.add_argument("--mode", choices=("position", "torque"), default="torque")
     p.add_argument("--duration", type=float, default=3.0, help="swing duration [s]")
     p.add_argument("--port", type=int, help="loopback port of the robot (default: a free one)")
+    add_config_args(p, SIM, HAL, CONTROL, ESTIMATION)  # passed on to servotau sim and servotau control
     p.set_defaults(func=main)
 
 
 def main(args) -> int:
+    config_files(args, SIM, HAL, CONTROL, ESTIMATION)  # a bad folder or file flag fails here, before anything starts
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     port = args.port or free_port()
@@ -36,14 +39,14 @@ def main(args) -> int:
     ready.unlink(missing_ok=True)
     cli = [sys.executable, "-m", "servotau.cli"]
     print(f"[demo] starting the robot process: servotau sim --port {port}", flush=True)
-    sim = subprocess.Popen([*cli, "sim", "--port", str(port), "--ready-file", str(ready)])
+    sim = subprocess.Popen([*cli, "sim", *forward(args, SIM, HAL), "--port", str(port), "--ready-file", str(ready)])
     try:
         wait_ready(sim, ready, 60.0)
         print("[demo] starting the controller process", flush=True)
         rrd, log = out / "demo.rrd", out / "log.parquet"
-        ctl = subprocess.run([*cli, "control", "--port", str(port), "--mode", args.mode, "--duration",
-                              str(args.duration), "--rerun", f"save:{rrd}", "--log", str(log),
-                              "--hold-timeout", str(HOLD_TIMEOUT)])
+        ctl = subprocess.run([*cli, "control", *forward(args, HAL, CONTROL, ESTIMATION), "--port", str(port),
+                              "--mode", args.mode, "--duration", str(args.duration), "--rerun", f"save:{rrd}",
+                              "--log", str(log), "--hold-timeout", str(HOLD_TIMEOUT)])
     finally:
         stop_process(sim, timeout=20.0)
         ready.unlink(missing_ok=True)

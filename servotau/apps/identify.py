@@ -1,8 +1,9 @@
 """servotau identify: collect actuator-identification data on a robot, fit the motor parameters.
 
-    servotau identify collect --out runs/ident.parquet [--hal hal.toml --backend inprocess|zenoh --port N]
-                              [--plan identification.toml] [--joints RLEG_JOINT0,...] [--sim-config ...]
-    servotau identify fit runs/ident.parquet [--joints ...] [--loss asymmetric|least_squares] [--w 100]
+    servotau identify collect --out runs/ident.parquet [--config DIR] [--hal hal.toml]
+                              [--backend inprocess|zenoh --port N] [--plan identification.toml]
+                              [--joints RLEG_JOINT0,...] [--sim-config ...]
+    servotau identify fit runs/ident.parquet [--config DIR] [--joints ...] [--loss asymmetric|least_squares] [--w 100]
                           [--two-stage] [--out config/motors/identified.toml] [--json]
 
 collect plays the plan (settle, high-velocity sweeps, high-torque holds; paper section 3.4) on any
@@ -19,11 +20,12 @@ import argparse
 import json
 import sys
 
+from servotau.apps.config_args import ESTIMATION, HAL, PLAN, SIM_IDENTIFICATION, add_config_args, config_files
 from servotau.config import Section
 from servotau.errors import IdentificationError
 
 DEFAULT_SIM_CONFIG = "sim_identification.toml"
-DEFAULT_MOTORS = "config/motors/identified.toml"  # in the repository (control.toml: motors = "motors/identified.toml")
+DEFAULT_MOTORS = "motors/identified.toml"  # in the config folder (control.toml: motors = "motors/identified.toml")
 
 
 def register(sub) -> None:
@@ -33,13 +35,10 @@ def register(sub) -> None:
 
     c = cmds.add_parser("collect", help="run the collection plan on a HAL backend and record a Parquet log")
     c.add_argument("--out", required=True, help="Parquet log to write")
-    c.add_argument("--hal", default="hal.toml", help="HAL config: [hal] backend = zenoh | inprocess")
     c.add_argument("--backend", choices=("inprocess", "zenoh"), help="override the config's backend")
     c.add_argument("--port", type=int, help="zenoh: the robot's port on 127.0.0.1 (overrides the config)")
-    c.add_argument("--plan", default="identification.toml", help="collection plan (default config/identification.toml)")
     c.add_argument("--joints", help="comma-separated joints to sweep (default: the plan's)")
-    c.add_argument("--sim-config", default=DEFAULT_SIM_CONFIG,
-                   help="inprocess only: simulation config (scenario with the scripted operator)")
+    add_config_args(c, HAL, PLAN, SIM_IDENTIFICATION)
     c.add_argument("--ignore-timing", action="store_true",
                    help="inprocess only: run even if the scenario's pushes miss the plan's hold windows")
     c.set_defaults(func=collect_main)
@@ -47,13 +46,14 @@ def register(sub) -> None:
     f = cmds.add_parser("fit", help="fit the actuator model of each joint on a collected log")
     f.add_argument("log", help="Parquet log from servotau identify collect (or any log with q_des)")
     f.add_argument("--joints", help="comma-separated joints to fit (default: the swept joints of the log)")
-    f.add_argument("--plan", default="identification.toml", help="plan file whose [fit] table gives the defaults")
+    add_config_args(f, PLAN, ESTIMATION)
     f.add_argument("--loss", choices=("asymmetric", "least_squares"), help="loss of the written fit")
     f.add_argument("--w", type=float, help="over-estimation weight of the asymmetric loss (default: plan, 100)")
     f.add_argument("--two-stage", action="store_true", help="write the two-stage fit (k_tau static, then k_v)")
     f.add_argument("--coulomb", action="store_true", help="also fit k_c sign(dq) in the written fit")
     f.add_argument("--downsample", type=int, help="keep every n-th valid sample (default: plan)")
-    f.add_argument("--out", default=DEFAULT_MOTORS, help=f"motor-parameter file to write (default {DEFAULT_MOTORS})")
+    f.add_argument("--out", help=f"motor-parameter file to write (default: {DEFAULT_MOTORS} of the --config folder, "
+                                 "or of config/ in a source checkout)")
     f.add_argument("--no-write", action="store_true", help="do not write the motor file")
     f.add_argument("--json", action="store_true", help="print one JSON object with the per-joint results")
     f.set_defaults(func=fit_main)
@@ -87,8 +87,10 @@ def collect_main(args) -> int:
 
     from .operator_script import check_timing
 
-    plan, _ = load_plan(args.plan)
-    section, name = hal_for_collection(args.hal, args.backend, args.sim_config)
+    files = config_files(args, HAL, PLAN, SIM_IDENTIFICATION)
+    sim_config = str(files.path(SIM_IDENTIFICATION.name))
+    plan, _ = load_plan(files.path(PLAN.name))
+    section, name = hal_for_collection(str(files.path(HAL.name)), args.backend, sim_config)
     joints = parse_joints(args.joints)
     backend = open_backend(section, backend=name, port=args.port)
     with backend:
@@ -102,7 +104,7 @@ def collect_main(args) -> int:
         if scenario is not None:
             problems = check_timing(plan, scenario.operator, backend.info.period)
             if problems:
-                msg = (f"scenario '{scenario.name}' of {args.sim_config} does not match the plan {plan.source}: "
+                msg = (f"scenario '{scenario.name}' of {sim_config} does not match the plan {plan.source}: "
                        + "; ".join(problems[:3]) + " (expected pushes inside the hold windows: see "
                        "docs/identification.md, or --ignore-timing)")
                 if not args.ignore_timing:
@@ -110,7 +112,7 @@ def collect_main(args) -> int:
                 print(f"servotau identify collect: warning: {msg}", file=sys.stderr)
         meta = {"servotau.identification.hal": str(section.file)}
         if name == "inprocess":
-            meta["servotau.identification.sim_config"] = args.sim_config
+            meta["servotau.identification.sim_config"] = sim_config
         result = run_collection(backend, plan, args.out, source=name, metadata=meta,
                                 progress=lambda m: print(m, flush=True))
     print(f"wrote {args.out}: {result.rows} ticks, {result.robot_seconds:.1f} s robot time in "
@@ -119,6 +121,20 @@ def collect_main(args) -> int:
 
 
 # -- fit ------------------------------------------------------------------------------------------------
+def _default_motors(files):
+    """Where ``fit`` writes without ``--out``: motors/identified.toml of the ``--config`` folder, or of config/ in a
+    source checkout (the packaged defaults of an installed wheel are not for writing)."""
+    from servotau.config import REPO_ROOT
+
+    if files.folder is not None:
+        return files.folder / DEFAULT_MOTORS
+    if files.defaults.resolve() == (REPO_ROOT / "config").resolve():
+        return files.defaults / DEFAULT_MOTORS
+    raise IdentificationError(f"no --out and no --config: expected a motor file to write (--out FILE) or a config "
+                              f"folder (--config DIR, written to DIR/{DEFAULT_MOTORS}); the packaged defaults in "
+                              f"{files.defaults} are not for writing")
+
+
 def fit_main(args) -> int:
     from dataclasses import replace
 
@@ -126,7 +142,8 @@ def fit_main(args) -> int:
     from servotau.identification.pipeline import fit_log, write_motor_file
     from servotau.identification.plan import LossKeys, load_plan, parse_joints
 
-    _, settings = load_plan(args.plan)
+    files = config_files(args, PLAN, ESTIMATION)
+    _, settings = load_plan(files.path(PLAN.name))
     if args.w is not None and (args.loss or settings.loss.kind) == "least_squares":
         raise IdentificationError(f"--w {args.w}: expected no weight with the least-squares loss")
     kind = args.loss or settings.loss.kind
@@ -140,13 +157,15 @@ def fit_main(args) -> int:
     if args.downsample is not None:
         changes["downsample"] = args.downsample
     settings = replace(settings, **changes)
-    report = fit_log(args.log, joints=parse_joints(args.joints), settings=settings,
+    from servotau.estimation import EstimatorConfig
+
+    estimation = EstimatorConfig.from_toml(files.path(ESTIMATION.name))
+    report = fit_log(args.log, joints=parse_joints(args.joints), settings=settings, estimator_config=estimation,
                      progress=(lambda m: print(m, file=sys.stderr)) if args.json else print)
     if not args.no_write:
-        from servotau.config import REPO_ROOT
-
+        out = args.out or _default_motors(files)
         try:
-            path = write_motor_file(report, REPO_ROOT / DEFAULT_MOTORS if args.out == DEFAULT_MOTORS else args.out)
+            path = write_motor_file(report, out)
         except IdentificationError:
             print(json.dumps(report.to_dict()) if args.json else report.table())  # the fits, then the error
             raise

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from servotau.actuator import Loss, effect_names
 from servotau.actuator.terms import K_TAU, K_V, OFFSET
+from servotau.apps.config_args import ESTIMATION, add_config_args, config_files, hanging_sim
 from servotau.errors import IdentificationError
 from servotau.identification.data import ROLES
 from servotau.identification.data.folds import DEFAULT_FOLDS, folds_of
@@ -73,6 +74,7 @@ def register(subparsers) -> None:
     sim.add_argument("--cycles", type=int, default=4, help="excitation cycles of 4 s")
     sim.add_argument("--seed", type=int, default=0)
     sim.add_argument("--quiet", action="store_true")
+    add_config_args(sim)  # scenarios/hanging.toml, servo.toml and sensors.toml of the simulated robot
     sim.set_defaults(func=run_simulate)
 
 
@@ -89,7 +91,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise IdentificationError(f"--cycles {args.cycles}: expected at least 1")
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     cols = simulate_log({e: {} for e in args.hidden}, joint=args.joint, plan=ExcitationPlan(cycles=args.cycles),
-                        seed=args.seed, progress=say)
+                        seed=args.seed, progress=say, base=hanging_sim(config_files(args)))
     path = write_table(cols, args.out)
     print(f"{path}: {len(cols['t'])} rows, hidden effects {args.hidden or 'none'} on {args.joint}")
     return 0
@@ -123,6 +125,7 @@ def _common(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--rerun", metavar="TARGET", help="save:FILE, connect:ADDR or spawn")
     sp.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_config_args(sp, ESTIMATION)  # the off-line estimator of a servotau log without an estimate
 
 
 def _base_spec(text: str, signals, offset: bool) -> ModelSpec:
@@ -179,7 +182,10 @@ def run(args: argparse.Namespace) -> int:
                                   "motor file)")
     say(f"reading {', '.join(args.log)}")
     roles = _roles(args.map)
-    ds = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.log])
+    from servotau.estimation.config import EstimatorConfig
+
+    estimation = EstimatorConfig.from_toml(config_files(args, ESTIMATION).path(ESTIMATION.name))
+    ds = combine([load_dataset(p, joint=args.joint, roles=roles, estimator_config=estimation) for p in args.log])
     if len(args.log) > 1 and args.folds == DEFAULT_FOLDS:
         args.folds = len(args.log)
     if dead_band and ds.joint is None:
@@ -267,7 +273,8 @@ def run(args: argparse.Namespace) -> int:
     if args.test:
         final = (ladder.final if ladder is not None
                  else comparison.model if comparison is not None else diagnosis.base.model)
-        test = combine([load_dataset(p, joint=args.joint, roles=roles) for p in args.test])
+        test = combine([load_dataset(p, joint=args.joint, roles=roles, estimator_config=estimation)
+                        for p in args.test])
         _has_signals(final, test, f"the model fitted on {ds.source}")
         tested = compare(test, final, loss)
         out["test"] = {"source": test.source, "n": test.n, "model": final.spec.label(),

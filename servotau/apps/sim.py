@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from pathlib import Path
+
+from servotau.apps.config_args import HAL, SIM, add_config_args, config_files, hal_config
 
 
 def register(sub) -> None:
     p = sub.add_parser("sim", help="serve the simulated HRP-2 over Zenoh (the robot process)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", default="sim.toml", help="simulation config (scenario, servo, sensors, seed)")
-    p.add_argument("--hal", default="hal.toml", help="HAL config ([hal.server] and [hal.safety])")
+    add_config_args(p, SIM, HAL)
     p.add_argument("--port", type=int, help="listen on tcp/127.0.0.1:PORT (overrides [hal.server] listen)")
     p.add_argument("--clock", choices=("lockstep", "realtime"), help="override [hal.server] clock")
     p.add_argument("--seed", type=int, help="override the config's seed")
@@ -30,10 +32,16 @@ def main(args) -> int:
     from servotau.hal.robot.server import serve
     from servotau.simrobot.sim import SimConfig, SimRobot
 
-    sim_config = SimConfig.from_toml(args.config)
+    if args.config and args.sim_config is None and (Path(args.config).is_file() or args.config.endswith(".toml")):
+        # the flag's former meaning: the sim file
+        print(f"servotau sim: --config {args.config} names a file: read as --sim-config (--config names a config "
+              "folder)", file=sys.stderr)
+        args = argparse.Namespace(**{**vars(args), "sim_config": args.config, "config": None})
+    files = config_files(args, SIM, HAL)
+    sim_config = SimConfig.from_toml(files.path(SIM.name))
     if args.seed is not None:
         sim_config = dataclasses.replace(sim_config, seed=args.seed)
-    config = server_config(args.hal, port=args.port)
+    config = server_config(hal_config(files), port=args.port)
     changes = {k: v for k, v in (("clock", args.clock), ("log", args.log), ("max_ticks", args.max_ticks)) if v}
     config = dataclasses.replace(config, **changes)
     robot = SimRobot(sim_config)

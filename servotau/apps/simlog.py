@@ -22,6 +22,7 @@ index in ``segment``.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Callable, Mapping
@@ -64,6 +65,7 @@ def simulate_log(
     tau_delay: float = 0.002,  # [s] estimator delay on the torque
     tau_noise: float = 0.3,  # [N m] white noise on the torque estimate
     progress: Callable[[str], None] | None = None,
+    base: SimConfig | None = None,
 ) -> dict[str, np.ndarray]:
     """Simulate one joint's identification log with ``effects`` hidden in the servo.
 
@@ -76,6 +78,7 @@ def simulate_log(
         tau_delay: Delay of the torque estimate [s].
         tau_noise: Standard deviation of the torque-estimate noise [N m].
         progress: Called with a short message every simulated second.
+        base: The simulation's files (scenario, servo, sensors; default: the packaged hanging robot).
 
     Returns:
         Columns ``t`` [s], ``q`` [rad], ``q_des`` [rad], ``tau`` [N m], ``segment``, ``true/tau``,
@@ -83,7 +86,8 @@ def simulate_log(
     """
     plan = plan or ExcitationPlan()
     overrides = {name: {**dict(params), "joints": [joint]} for name, params in (effects or {}).items()}
-    robot = SimRobot(SimConfig.named("hanging", effects=overrides or None, seed=seed))
+    base = base or SimConfig.named("hanging")
+    robot = SimRobot(dataclasses.replace(base, effects=overrides or None, seed=seed))
     if joint not in robot.joint_names:
         raise IdentificationError(f"joint '{joint}': expected one of {list(robot.joint_names)}")
     j = robot.info.joint_index(joint)
