@@ -258,7 +258,8 @@ class RerunStream:
         self.rec.send_columns(ENTITY, [rr.TimeColumn(TIMELINE, duration=times)], cols)
 
     def close(self) -> StreamStats:
-        """Send what is buffered, wait for the sending thread, flush the recording; what the stream cost."""
+        """Send what is buffered, wait for the sending thread, flush and close the recording (a file gets its
+        footer); what the stream cost."""
         if self.rec is not None:
             self.flush()
             self._flush_robot()
@@ -266,6 +267,7 @@ class RerunStream:
             self._worker.join()
             c0 = _cpu()
             self.rec.flush()
+            self.rec.disconnect()
             self._caller_cpu += _cpu() - c0
         span = 0.0 if np.isnan(self._t0) else float(self._t1 - self._t0)
         return StreamStats(self.rows, span, self._caller_cpu, self._sender_cpu)

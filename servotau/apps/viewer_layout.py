@@ -85,12 +85,9 @@ def channels(signal_set: str, ft_sensors: Sequence[str]) -> dict[str, Channel]:
 
     if signal_set not in SIGNAL_SETS:
         raise ConfigError(f"rerun signal set {signal_set!r}: expected one of {', '.join(SIGNAL_SETS)}")
-    out = {**TRACKING, "tau_est": TORQUE["tau_est"]}
-    if signal_set in ("control", "all"):
-        out.update(TORQUE)
-        out.update(COMMAND)
-        out.update(IMU)
-        out.update(ft_channels(ft_sensors))
+    if signal_set == "minimal":
+        return {**TRACKING, "tau_est": TORQUE["tau_est"]}
+    out = {**TRACKING, **TORQUE, **COMMAND, **IMU, **ft_channels(ft_sensors)}
     if signal_set == "all":
         out.update(INTERNAL)
         out.update(TASK)
