@@ -162,7 +162,8 @@ def test_bad_mappings_and_bags_are_errors_naming_the_topic_or_field(tmp_path, ma
     fails(MAPPING.replace("[ft.right_ankle]", "[ft.right_foot]"), r"field 'ft.right_foot'.*expected a known field")
     fails(MAPPING.replace('name = "bagbot"', 'name = "bagbot"\nstamp = "wall"'),
           r"field 'robot.stamp' = 'wall': expected one of \['header', 'bag'\]")
-    fails(MAPPING.replace('[joint_state]\ntopic = "/joint_states"', "[joint_state]"), r"field 'joint_state.topic' missing")
+    fails(MAPPING.replace('[joint_state]\ntopic = "/joint_states"', "[joint_state]"),
+          r"field 'joint_state.topic' missing")
     fails(MAPPING.replace('j3 = "RLEG_JOINT3"', 'j3 = "KNEE"'), "joint 'KNEE' .*is not in the model")
     short = tmp_path / "short"
     _write_short_commands(short)
@@ -191,3 +192,22 @@ def _write_short_commands(path) -> None:
                 msg = T["sensor_msgs/msg/JointState"](header=header, name=names, position=np.zeros(len(names)),
                                                       velocity=np.zeros(0), effort=np.zeros(len(names)))
                 w.write(conns[name], ns, ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+
+
+@pytest.mark.slow
+def test_identify_fit_accepts_a_converted_bag(tmp_path, mapping, monkeypatch, capsys):
+    """`servotau identify fit` on a converted 3.6 s bag (no torque column: the off-line estimator's, from the
+    encoders, IMU and F/T): it estimates, splits and fits; the fit's numbers are not checked (synthetic motion)."""
+    import json
+    import sys
+
+    monkeypatch.setattr(sys.modules[__name__], "N", 3600)
+    bag = tmp_path / "b"
+    write_bag(bag, "mcap")
+    mapping.write_text(MAPPING.replace("effort = true", "effort = false"))
+    log = convert_bag(bag, mapping, tmp_path / "log.parquet").path
+    assert main(["identify", "fit", str(log), "--joints", "RLEG_JOINT3", "--no-write", "--json"]) == 0
+    fit = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert fit["log"] == str(log)
+    text = json.dumps(fit)
+    assert "RLEG_JOINT3" in text and '"n_samples": 0' not in text  # training and held-out samples both
