@@ -1,11 +1,12 @@
 """``servotau log convert BAG --map mapping.toml -o log.parquet``: a ROS bag as servotau's log.
 
 Reads a ROS 1 bag or a ROS 2 bag (MCAP or SQLite) with the library rosbags and writes the log that
-``servotau model`` and ``servotau identify fit`` read (hal/log.py): one row per message of the joint_state topic
-(q/<joint>, the joints in the model's order), the other topics held at their latest message at or before the row (q_des/<joint>, imu/..., ft/...;
-their status ``stale`` when that message is older than 1.5 periods, ``invalid`` when the topic is not mapped).
-Rows before every mapped topic has sent a message are dropped (counted). ``t`` starts at 0 at the first row;
-the bag's time of that row is kept in the metadata (``bag.start_ns``). The mapping file: servotau/apps/bag_mapping.py.
+``servotau model`` and ``servotau identify fit`` read (hal/log.py): one row per message of the joint_state
+topic (q/<joint>, the joints in the model's order); the other topics held at their latest message at or
+before the row (q_des/<joint>, imu/..., ft/...), their status ``stale`` when that message is older than 1.5
+periods, ``invalid`` when the topic is not mapped. Rows before every mapped topic has sent a message are
+dropped (counted). ``t`` starts at 0 at the first row; the bag's time of that row is kept in the metadata
+(``bag.start_ns``). The mapping file: servotau/apps/bag_mapping.py.
 """
 
 from __future__ import annotations
