@@ -22,6 +22,23 @@ from servotau.apps.bag_read import read_bag
 from servotau.errors import ConfigError
 
 STALE_PERIODS = 1.5  # a held message older than this many periods is stale
+HELP = """Convert a ROS 1 bag or a ROS 2 bag (MCAP or SQLite) into servotau's log (Parquet), which
+servotau model and servotau identify fit read.
+
+One row per message of the joint_state topic (sensor_msgs/JointState: q/<joint> [rad]); the joint_command
+topic gives q_des/<joint> [rad], the imu topic (sensor_msgs/Imu) imu/gyro_x.. [rad/s] and imu/acc_x.. [m/s^2],
+each ft.<sensor> topic (geometry_msgs/WrenchStamped) ft/<sensor>/fx..tz [N, N m], each held at its latest
+message at or before the row (status stale when older than 1.5 periods; sensors not mapped are NaN, status
+invalid). Rows before every mapped topic has sent a message are dropped. t [s] starts at 0.
+
+Mapping file (TOML):
+  [robot]          name, model ("hrp2" or an MJCF file), period [s], stamp ("header" or "bag")
+  [joint_state]    topic, velocity = true|false (est/dq), effort = true|false (est/tau)
+  [joint_command]  topic
+  [imu]            topic
+  [ft.right_ankle] topic      (sensors: right_ankle, left_ankle, right_wrist, left_wrist)
+  [joints]         bag_name = "HAL_NAME"
+"""
 
 
 @dataclass(frozen=True)
@@ -166,10 +183,9 @@ def register(sub) -> None:
                        description="Logs in servotau's format (Parquet, hal/log.py).")
     cmds = p.add_subparsers(dest="log_command", required=True, metavar="COMMAND")
     c = cmds.add_parser("convert", help="a ROS 1 or ROS 2 bag (MCAP or SQLite) as a servotau log",
-                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                        description=HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("bag", help="the .bag file (ROS 1) or the bag folder (ROS 2)")
-    c.add_argument("--map", required=True, metavar="TOML", help="mapping of topics to log columns "
-                   "(servotau/apps/bag_mapping.py)")
+    c.add_argument("--map", required=True, metavar="TOML", help="mapping of topics to log columns (above)")
     c.add_argument("-o", "--out", required=True, help="the Parquet log to write")
     c.set_defaults(func=main)
 
