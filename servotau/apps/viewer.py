@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import rerun as rr
@@ -40,7 +41,7 @@ def _spawn_local(port: int) -> str:
     """Start the rerun viewer listening on 127.0.0.1:``port``; its gRPC address."""
     import socket
 
-    exe = shutil.which("rerun", path=str(__import__("pathlib").Path(sys.executable).parent)) or "rerun"
+    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or "rerun"  # the one of this environment
     subprocess.Popen([exe, "--bind", "127.0.0.1", "--port", str(port)], stdin=subprocess.DEVNULL,
                      start_new_session=True)
     deadline = time.monotonic() + VIEWER_START_S
