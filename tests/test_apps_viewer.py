@@ -178,3 +178,23 @@ def test_bad_rerun_target_joint_names_plot_joints_or_rate_are_clear_errors(tmp_p
         RerunStream(open_recording("memory"), JOINT_NAMES, str(MODEL_PATH), plot_joints=["J9"])
     with pytest.raises(ConfigError, match=r"rerun robot rate -1.0: expected >= 0 \[Hz\]"):
         RerunStream(open_recording("memory"), JOINT_NAMES, str(MODEL_PATH), robot_hz=-1.0)
+
+
+def test_spawn_starts_a_viewer_bound_to_loopback_and_waits_for_it(monkeypatch):
+    """spawn:PORT starts `rerun --bind 127.0.0.1 --port PORT` (stubbed here: tests never start a viewer) and returns
+    its address once the port listens; a viewer that never listens is a clear error."""
+    import socket
+
+    from servotau.apps import viewer
+
+    started = []
+    monkeypatch.setattr(viewer.subprocess, "Popen", lambda args, **kw: started.append(args))
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+        assert viewer._spawn_local(port) == f"rerun+http://127.0.0.1:{port}/proxy"
+    assert started[0][1:] == ["--bind", "127.0.0.1", "--port", str(port)]
+    monkeypatch.setattr(viewer, "VIEWER_START_S", 0.2)
+    with pytest.raises(ConfigError, match=rf"did not listen on 127.0.0.1:{port} within 0.2 s"):
+        viewer._spawn_local(port)
