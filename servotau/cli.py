@@ -26,6 +26,7 @@ COMMANDS = {
     "identify": "servotau.apps.identify",
     "model": "servotau.apps.model",
     "certs": "servotau.apps.certs",
+    "log": "servotau.apps.log_convert",
     "experiment": "servotau.experiments",
     "config": "servotau.apps.config_cmd",
 }

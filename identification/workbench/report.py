@@ -1,15 +1,19 @@
 """Static report: one HTML page with PNG plots (matplotlib, Agg backend) that a person can open.
 
 ``write_report(out_dir, ...)`` writes ``index.html`` and the PNG files next to it:
-``timeseries.png`` (measurement and models), ``residual_velocity.png``, ``residual_torque.png``,
-``residual_position.png``, ``residual_time.png``, ``heatmap.png``, ``correlation.png``,
-``ranking.png`` and ``ladder.png`` (those that apply).
+``timeseries.png`` (measurement and models, each model's fit in the legend, as MATLAB's ``compare``),
+``residual_velocity.png``, ``residual_torque.png``, ``residual_position.png``, ``residual_time.png``,
+``heatmap.png``, ``correlation.png`` (the residual's autocorrelation and its cross-correlation with the inputs,
+with the 95 % band +-1.96/sqrt(N) of a white residual, as MATLAB's ``resid``), ``ranking.png`` and
+``ladder.png`` (those that apply); and ``summary.json`` (the numbers, linked from the page) when given.
+Coefficients are listed with their units; a title too wide for its plot is wrapped, never cut.
 """
 
 from __future__ import annotations
 
 import html
 import json
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -21,6 +25,7 @@ from .data import Dataset, describe
 from .diagnose import Diagnosis
 from .evaluate import Comparison, Metrics
 from .ladder import Ladder
+from .model import K_TAU, K_V, OFFSET, FittedModel
 from .units import Unit, unit_of
 from .views import ResidualViews, residual_views
 
@@ -34,11 +39,55 @@ def _plt():
     return plt
 
 
+def fit_titles(fig) -> None:
+    """Wrap each axes title onto more lines until it is no wider than its axes (a long model label never runs
+    past the plot or into its neighbour)."""
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:
+        title, text = ax.title, ax.title.get_text()
+        width = ax.get_window_extent(renderer).width
+        chars = len(text)
+        while text and title.get_window_extent(renderer).width > width and chars > 8:
+            chars = int(chars * 0.85)
+            title.set_text(textwrap.fill(text, chars, break_long_words=True))
+
+
 def _save(fig, path: Path) -> str:
-    fig.tight_layout()
+    fit_titles(fig)
+    fig.tight_layout()  # labels and the wrapped titles inside the figure
     fig.savefig(path, dpi=90)
     _plt().close(fig)
     return path.name
+
+
+def _fit(c: Comparison) -> tuple[float, str]:
+    """The fit [%] shown for a model: held-out when there is one, else training."""
+    return (c.heldout.fit_percent, "held-out") if c.heldout is not None else (c.train.fit_percent, "training")
+
+
+# Unit of each built-in effect's regressor phi (actuator/effects/<name>.py): "1" dimensionless, "target" the
+# target's own unit; a coefficient is in [target unit / unit of phi].
+PHI_UNITS = {"coulomb": "1", "coulomb_asym": "1", "stiction": "1", "stribeck": "1", "deadzone": "1", "cogging": "1",
+             "dahl": "1", "lugre": "1", "viscous_power": "1", "direction_gain": "target", "motor_lag": "target",
+             "load_friction": "N m", "delay": "rad", "elastic": "rad/s^2"}
+
+
+def coefficient_unit(name: str, si: str, effect: bool) -> str:
+    """Unit of coefficient ``name`` (k_tau, k_v, offset or an effect) of a model of a target in ``si``."""
+    if not effect:
+        return {K_TAU: f"{si}/(N m)", K_V: f"{si}/(rad/s)", OFFSET: si}.get(name, "?")
+    phi = PHI_UNITS.get(name)
+    if phi is None:
+        return f"{si} per unit of phi (actuator/effects/{name}.py)"
+    return si if phi == "1" else ("-" if phi == "target" or phi == si else f"{si}/({phi})")
+
+
+def _coefficients(label: str, m: FittedModel, u: Unit) -> str:
+    rows = [[html.escape(k), f"{m.coefficients[k]:.6g}", html.escape(coefficient_unit(k, u.si, False))]
+            for k in m.spec.linear]
+    rows += [[html.escape(t.label()), f"{m.coefficients[t.effect]:.6g}",
+              html.escape(coefficient_unit(t.effect, u.si, True))] for t in m.spec.terms]
+    return f"<p><b>{html.escape(label)}</b></p>" + _table(rows, ["coefficient", "value", "unit"])
 
 
 def _plot_timeseries(ds: Dataset, models: Sequence[tuple[str, Comparison]], path: Path, u: Unit) -> str:
@@ -49,9 +98,11 @@ def _plot_timeseries(ds: Dataset, models: Sequence[tuple[str, Comparison]], path
     a.plot(t[::step], u.scale * ds.target[::step], "k", lw=0.8, label="measured")
     for label, c in models:
         pred = c.heldout_prediction if c.heldout_prediction is not None else c.prediction
-        a.plot(t[::step], u.scale * pred[::step], lw=0.8, label=f"{label} (held-out)")
+        fit, on = _fit(c)
+        a.plot(t[::step], u.scale * pred[::step], lw=0.8, label=f"{label}: fit {fit:.1f} % ({on})")
         b.plot(t[::step], u.scale * (ds.target - pred)[::step], lw=0.6, label=label)
     a.set_ylabel(f"{u.name} [{u.symbol}]")
+    a.set_title("measured and simulated output (fit = 100 (1 - |y - model| / |y - mean y|))")
     a.legend(fontsize=7, loc="upper right")
     b.set_ylabel(f"residual [{u.symbol}]")
     b.set_xlabel("time [s]" if ds.dt else "sample")
@@ -104,16 +155,21 @@ def _plot_views(views: Sequence[tuple[str, ResidualViews]], out: Path, u: Unit) 
             im = ax.pcolormesh(v.heatmap_dq_edges, v.heatmap_tau_edges, u.scale * v.heatmap.T, cmap="RdBu_r",
                                vmin=-lim, vmax=lim)
             ax.set(xlabel="velocity [rad/s]", ylabel="torque [N m]", title=f"{label}: mean residual [{u.symbol}]")
-            fig.colorbar(im, ax=ax)
+            fig.colorbar(im, ax=ax, label=f"mean residual [{u.symbol}]")
         files["heatmap"] = _save(fig, out / "heatmap.png")
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 3.5))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 3.8))
+    conf = views[0][1].confidence
+    for ax in (a, b):
+        ax.axhspan(-conf, conf, color="0.85", label=f"95 % band +-1.96/sqrt(N), N = {views[0][1].n}")
+        ax.axhline(0, color="k", lw=0.5)
     for label, v in views:
         lag = v.lags[v.lags >= 0]
         a.plot(lag, v.autocorrelation, label=label)
         for name, c in v.crosscorrelation.items():
             b.plot(v.lags, c, label=f"{label}: {name}")
-    a.set(xlabel="lag [s]", ylabel="autocorrelation", title="residual autocorrelation")
-    b.set(xlabel="lag [s] (> 0: input leads)", ylabel="correlation", title="residual-input cross-correlation")
+    a.set(xlabel="lag [s]", ylabel="autocorrelation [-]", title="residual autocorrelation")
+    b.set(xlabel="lag [s] (> 0: input leads)", ylabel="cross-correlation [-]",
+          title="cross-correlation of the residual with the inputs")
     a.legend(fontsize=7)
     b.legend(fontsize=6)
     files["correlation"] = _save(fig, out / "correlation.png")
@@ -200,8 +256,8 @@ def write_report(
                  f"<table><tr><th>model</th><th>fit [%]</th><th>RMS [{u.symbol}]</th>"
                  f"<th>asymmetric loss [({u.symbol})^2]</th>"
                  "<th>over-estimation [%]</th></tr>" + "".join(rows) + "</table>")
-    for label, c in models:
-        parts.append(f"<p><b>{html.escape(label)}</b>: " + html.escape("; ".join(c.model.describe())) + "</p>")
+    parts.append("<h2>Coefficients</h2>")
+    parts += [_coefficients(label, c.model, u) for label, c in models]
     files = {"timeseries": _plot_timeseries(ds, models, out / "timeseries.png", u)}
     if ladder is not None and len(ladder.rungs) > 1:
         files["ladder"] = _plot_ladder(ladder, out / "ladder.png", u)
@@ -242,9 +298,12 @@ def write_report(
         exc = excitation_report(ds.signals)
     parts.append("<h2>Excitation</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in exc.lines()) + "</ul>")
     if summary is not None:
-        parts.append("<h2>JSON</h2><pre>" + html.escape(json.dumps(summary, indent=1)[:20000]) + "</pre>")
-    style = ("<style>body{font-family:sans-serif;max-width:1200px;margin:auto}table{border-collapse:collapse}"
-             "td,th{border:1px solid #bbb;padding:2px 6px;font-size:13px}img{max-width:100%}</style>")
+        (out / "summary.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
+        parts.append('<h2>Numbers</h2><p>Every figure of this report as JSON: <a href="summary.json">summary.json</a>'
+                     "</p>")
+    style = ("<style>body{font-family:sans-serif;max-width:1200px;margin:auto;padding:0 8px}"
+             "table{border-collapse:collapse;margin:4px 0}td,th{border:1px solid #bbb;padding:2px 6px;font-size:13px}"
+             "img{max-width:100%;height:auto;display:block;margin:6px 0}h1,h2{overflow-wrap:anywhere}</style>")
     page = f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>{style}</head>"
     page += "<body>" + "\n".join(parts) + "</body></html>\n"
     path = out / "index.html"

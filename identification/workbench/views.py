@@ -43,6 +43,9 @@ class ResidualViews:
         lags: Lags [s] of the correlations (sample index if no time).
         autocorrelation: Of the residual at ``lags >= 0``.
         crosscorrelation: Of the residual with each input at ``lags`` (positive: the input leads).
+        n: Residual samples the correlations are computed on.
+        confidence: Half-width of the 95 % band of a white residual's correlations, ``1.96 / sqrt(n)`` (as
+            MATLAB's ``resid``): correlations outside it are significant.
     """
 
     velocity: dict[str, Binned]
@@ -55,6 +58,8 @@ class ResidualViews:
     lags: np.ndarray
     autocorrelation: np.ndarray
     crosscorrelation: dict[str, np.ndarray]
+    n: int = 0
+    confidence: float = float("nan")
 
 
 def binned(x: np.ndarray, r: np.ndarray, edges: np.ndarray) -> Binned:
@@ -125,4 +130,4 @@ def residual_views(ds: Dataset, residual: np.ndarray, max_lag_s: float = 0.2) ->
             x = s[name] if name != "q_des" else np.gradient(s["q_des"], dt)
             cross[name if name != "q_des" else "dq_des"] = _xcorr(r, x, lags)
     return ResidualViews(velocity, torque, position, time, heat, de, te, lags * (dt if ds.dt else 1.0),
-                         auto, cross)
+                         auto, cross, len(r), 1.96 / np.sqrt(len(r)))

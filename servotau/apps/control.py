@@ -37,7 +37,7 @@ from servotau.apps.config_args import (
     controller_parts,
     hal_config,
 )
-from servotau.apps.viewer import RerunStream, open_recording
+from servotau.apps.viewer import RerunHook, RerunStream, open_recording
 from servotau.control.loop import ControlLoop, LoopHook, Tick
 from servotau.control.operator import OperatorChannel
 from servotau.control.trajectory import right_leg_swing
@@ -90,34 +90,6 @@ class LogHook(LoopHook):
         self.writer.append(tick.frame, tick.terms.q_des, tick.truth, {"est/tau": e.tau, "est/dq": e.dq})
 
 
-class RerunHook(LoopHook):
-    """Every tick to a :class:`~servotau.apps.viewer.RerunStream`: joint signals, command components, IMU, F/T, the
-    ground-truth torque and the 3D robot (at the ground-truth base pose when there is one)."""
-
-    wants_truth = True
-
-    def __init__(self, stream: RerunStream, ft_sensor_names):
-        self.stream = stream
-        self.ft_sensor_names = tuple(ft_sensor_names)
-
-    def on_tick(self, tick: Tick) -> None:
-        frame, terms, truth = tick.frame, tick.terms, tick.truth
-        signals = {"q": frame.q, "q_des": terms.q_des, "q_ref": tick.reference.q, "dq_err": terms.q_des - frame.q,
-                   "tau_est": tick.estimate.tau, "ff_friction": terms.ff_friction, "ff_extra": terms.ff_extra,
-                   "ff_torque": terms.ff_torque,
-                   "fb_position": terms.fb_position, "fb_velocity": terms.fb_velocity,
-                   "fb_acceleration": terms.fb_acceleration, "fb_force": terms.fb_force,
-                   "imu/gyro": frame.imu_angular_velocity, "imu/acc": frame.imu_linear_acceleration}
-        for s, name in enumerate(self.ft_sensor_names):
-            signals[f"ft/{name}/force"] = frame.wrenches[s, :3]
-            signals[f"ft/{name}/torque"] = frame.wrenches[s, 3:]
-        if truth is not None:
-            signals["tau_true"] = truth.tau
-        self.stream.add(frame.time, **signals)
-        base = (truth.base_position, truth.base_quat_wxyz) if truth is not None else (None, None)
-        self.stream.robot(frame.time, frame.q, *base)
-
-
 class _Progress(LoopHook):
     def __init__(self, progress, mode: str, duration: float):
         self.progress, self.mode, self.duration = progress, mode, duration
@@ -145,7 +117,10 @@ def register(sub) -> None:
     p.add_argument("--mode", choices=("position", "torque"), default="position")
     p.add_argument("--duration", type=float, default=3.0, help="swing duration [s]")
     p.add_argument("--log", default=None, help="Parquet log path")
-    p.add_argument("--rerun", default="off", help="save:FILE | connect:ADDR | spawn | off")
+    p.add_argument("--rerun", default="off", help="save:FILE | connect:ADDR | spawn[:PORT] | off")
+    p.add_argument("--rerun-signals", choices=("minimal", "control", "all"), default="control",
+                   help="what the Rerun recording holds (servotau/apps/viewer_layout.py; default: control)")
+    p.add_argument("--rerun-robot-hz", type=float, default=20.0, help="[Hz] 3D robot poses per robot second (0: none)")
     p.add_argument("--hold-timeout", type=float, default=None, metavar="SECONDS",
                    help="[s] robot time a safety hold waits for the operator (servotau ctl reset|release) before "
                         "releasing by itself, exit code 3 (default: wait for the operator)")
@@ -270,7 +245,9 @@ def main(args) -> int:
         if args.hold_timeout is not None:
             hint += f"; releasing by itself after {args.hold_timeout:g} s"
         rec = open_recording(args.rerun)
-        stream = RerunStream(rec, backend.info.joint_names, backend.info.model_path) if rec is not None else None
+        stream = RerunStream(rec, backend.info.joint_names, backend.info.model_path, signals=args.rerun_signals,
+                             ft_sensor_names=backend.info.ft_sensor_names,
+                             robot_hz=args.rerun_robot_hz) if rec is not None else None
         writer = LogWriter(args.log, backend.info, metadata={"mode": args.mode},
                            realtime=_on_wall_clock(backend)) if args.log else None
         result = run_session(backend, mode=args.mode, duration=args.duration, stream=stream, writer=writer,
@@ -286,7 +263,9 @@ def main(args) -> int:
             if writer is not None:
                 writer.close()
             if stream is not None:
-                stream.close()
+                st = stream.close()
+                print(f"rerun: {st.rows} ticks, {st.robot_seconds:.2f} s robot time, recording CPU {st.cpu_s:.2f} s "
+                      f"(control thread {st.caller_cpu_s:.2f} s, sender thread {st.sender_cpu_s:.2f} s)")
         finally:
             backend.close()
             quiesce_threads(threads_before)

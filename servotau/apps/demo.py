@@ -53,6 +53,16 @@ def main(args) -> int:
     if ctl.returncode != 0:
         print(f"[demo] the controller exited with code {ctl.returncode}", file=sys.stderr)
         return ctl.returncode
-    print(f"[demo] done: {rrd} ({os.path.getsize(rrd) / 1e6:.1f} MB, open with .venv/bin/rerun {rrd}), "
-          f"{log} ({os.path.getsize(log) / 1e6:.1f} MB)")
+    mb, seconds = os.path.getsize(rrd) / 1e6, _robot_seconds(log)
+    print(f"[demo] done: {rrd} ({mb:.2f} MB, {mb / seconds:.2f} MB per robot second over {seconds:.2f} s; open with "
+          f".venv/bin/rerun {rrd}), {log} ({os.path.getsize(log) / 1e6:.1f} MB)")
     return 0
+
+
+def _robot_seconds(log: Path) -> float:
+    """[s] robot time the log covers: its first to its last tick, plus one period."""
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(log, columns=["t"]).column("t").to_numpy()
+    return float(t[-1] - t[0] + np.median(np.diff(t))) if len(t) > 1 else 0.0

@@ -1,6 +1,7 @@
 """Interactive views in Rerun (``--rerun save:FILE|connect:ADDR|spawn``).
 
-Entities: ``model/measured`` and ``model/<model>/{prediction,residual}`` on the ``time`` timeline;
+Entities: ``model/measured`` and ``model/<model>/{prediction,residual}`` on the ``time`` timeline (their series
+named with the unit, the prediction with the model's fit [%], as MATLAB's ``compare``);
 ``residual/<model>/{velocity,torque,position}`` as 2D scatter plots (x: the signal, y: the residual in the
 target's unit, identification/workbench/units.py: urad for a servo log, mN m or N m for a torque table);
 ``residual/<model>/heatmap`` (mean residual on a velocity x torque grid); ``diagnosis/ranking`` (a bar
@@ -65,11 +66,16 @@ def log_to_rerun(
     u = unit or unit_of(ds)
     t = ds.time
     index = [rr.TimeColumn(TIMELINE, duration=t)]
+    rec.log("model/measured", rr.SeriesLines(names=[f"measured {u.name} [{u.symbol}]"]), static=True)
     rec.send_columns("model/measured", index, rr.Scalars.columns(scalars=u.scale * ds.target))
     s = ds.signals
     for label, c in models:
         name = _entity(label)
         pred = c.heldout_prediction if c.heldout_prediction is not None else c.prediction
+        fit = c.heldout.fit_percent if c.heldout is not None else c.train.fit_percent
+        rec.log(f"model/{name}/prediction", rr.SeriesLines(names=[f"{label}: fit {fit:.1f} % [{u.symbol}]"]),
+                static=True)
+        rec.log(f"model/{name}/residual", rr.SeriesLines(names=[f"{label} residual [{u.symbol}]"]), static=True)
         rec.send_columns(f"model/{name}/prediction", index, rr.Scalars.columns(scalars=u.scale * pred))
         rec.send_columns(f"model/{name}/residual", index, rr.Scalars.columns(scalars=u.scale * (ds.target - pred)))
         r = ds.target - pred
