@@ -58,7 +58,7 @@ from .manager import ControlManager, Mode
 from .operator import OperatorChannel
 from .safety import SafetyReport
 from .terms import ControlTerms
-from .trajectory import TrajectoryPoint
+from .trajectory import TrajectoryPoint, stopping_segment
 
 log = logging.getLogger(__name__)
 
@@ -349,8 +349,6 @@ class ControlLoop:
 
     def _begin_stop(self, last: TrajectoryPoint, t: float):
         """The stop segment from the last reference (module doc) and the switch to position mode."""
-        from .tasks.profile import stopping_segment  # ruckig: loaded on the first stop only
-
         log.info("stopping at t = %.3f s: the reference comes to rest, position mode", t)
         if not self.manager.tripped:
             self.manager.request_mode(Mode.POSITION)

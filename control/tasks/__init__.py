@@ -14,8 +14,8 @@ A task of your own subclasses :class:`Task` and returns :class:`Phase` objects b
 ``servotau control --task mypkg.mytask:MyTask`` runs it. docs/control.md ("Tasks") has the file format.
 """
 
-from .build import FileTask, InfeasibleTask, Phase, Task, check_feasible, resolve_task, task_control_config
-from .plugin import import_task
+from .build import FileTask, InfeasibleTask, Phase, Task, check_feasible, task_control_config
+from .plugin import import_task, resolve_task
 from .references import Hold, JerkLimited, JointReference, MinJerk, Sinusoids, Tabled
 from .runner import TaskRunner
 from .spec import ForceSpec, PhaseSpec, ReferenceSpec, TaskSpec, Wave, load_task, task_path

@@ -26,6 +26,7 @@ from .spec import ForceSpec, TaskSpec, load_task
 from .table import load_table
 
 START_TOLERANCE = 0.01  # [rad] an absolute trajectory table must start this close to the posture at its phase
+SHORT_SPEED = 2.5  # [rad/s] peak speed of a min-jerk phase in a shortened task (FileTask.shortened)
 
 
 class InfeasibleTask(ControlError):
@@ -48,6 +49,12 @@ class Phase:
     def length(self) -> float | None:
         """[s] how long the phase runs (None: until stopped)."""
         return self.duration if self.duration is not None else self.reference.duration
+
+
+def ref_waypoints(p, ref: MinJerk):
+    """The waypoints of ``p`` with the times ``ref`` was built with (scaled to the phase's duration)."""
+    times = ref.traj.times[1:]
+    return tuple(replace(w, at=float(t)) for w, t in zip(p.reference.waypoints, times, strict=True))
 
 
 class Task:
@@ -82,13 +89,14 @@ class FileTask(Task):
                                               for p in spec.phases))
         return cls(spec)
 
-    def shortened(self, seconds: float) -> FileTask:
-        """The task with every phase that has a duration cut to at most ``seconds`` (quick runs, tests); a
-        waypoints phase keeps at least its trajectory's time-optimal length."""
-        phases = tuple(replace(p, duration=min(p.duration, seconds)) if p.duration is not None else p
-                       for p in self.spec.phases)
-        out = FileTask(replace(self.spec, phases=phases))
-        out._shortened = True
+    def shortened(self, seconds: float, settle: float | None = None) -> FileTask:
+        """The task with every phase cut to at most ``seconds`` (quick runs, tests) and the settle phase to
+        ``settle`` [s]: a jerk-limited phase keeps its time-optimal length, a min-jerk one the length at which its
+        peak speed is :data:`SHORT_SPEED`, a table its own."""
+        phases = tuple(replace(p, duration=min(p.duration, seconds))
+                       if p.duration is not None and p.reference.kind != "waypoints" else p for p in self.spec.phases)
+        out = FileTask(replace(self.spec, phases=phases, settle=self.spec.settle if settle is None else settle))
+        out._short = seconds
         return out
 
     def phases(self, info: RobotInfo, q_start: np.ndarray) -> list[Phase]:
@@ -101,7 +109,13 @@ class FileTask(Task):
                     replace(w, at=w.at * duration / ref.duration) for w in p.reference.waypoints))), info, q0,
                     q_start)
                 duration = None
-            if isinstance(ref, JerkLimited) and getattr(self, "_shortened", False) and duration is not None:
+            short = getattr(self, "_short", None)
+            if isinstance(ref, MinJerk) and short is not None:
+                peak = float(ref.envelope(None)[2].max())
+                scale = min(1.0, max(short, ref.duration * peak / SHORT_SPEED) / ref.duration)
+                ref = self._reference(replace(p, reference=replace(p.reference, waypoints=tuple(
+                    replace(w, at=w.at * scale) for w in ref_waypoints(p, ref)))), info, q0, q_start)
+            if isinstance(ref, JerkLimited) and short is not None and duration is not None:
                 duration = max(duration, ref.optimal)
             out.append(Phase(p.name, ref, p.mode, duration, p.force, dict(p.gains)))
             q0 = ref.end if not (p.force is not None and p.force.posture == "compatible") else q0
@@ -212,14 +226,3 @@ def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: Forc
         data["force"] = {"sensor": force.sensor, "frame": force.frame, "offset": list(force.offset),
                          "axes": list(force.axes), "k_f": list(force.k_f)}
     return ControlConfig.from_mapping(data, info, file=f"{root.file} with the gains of {file or 'the task'}")
-
-
-def resolve_task(name: str, duration: float | None = None) -> Task:
-    """A task by name (config/tasks/NAME.toml), file path or import path ``module:attribute`` (:mod:`.plugin`)."""
-    if ":" in name and not Path(name).exists():
-        from .plugin import import_task
-
-        if duration is not None:
-            raise ConfigError(f"--duration: applies to task files only, not to {name}")
-        return import_task(name)
-    return FileTask.load(name, duration)

@@ -9,10 +9,11 @@ interface, is a :class:`~servotau.errors.ConfigError` that says which and what w
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 
 from servotau.errors import ConfigError
 
-from .build import Task
+from .build import FileTask, Task
 
 EXPECTED = "a task: an object (or a class called without arguments) with name and phases(info, q_start)"
 
@@ -53,3 +54,12 @@ def import_task(path: str) -> Task:
             except AttributeError:
                 pass
     return obj
+
+
+def resolve_task(name: str, duration: float | None = None) -> Task:
+    """A task by name (config/tasks/NAME.toml), file path or import path ``module:attribute`` (:mod:`.plugin`)."""
+    if ":" in name and not Path(name).exists():
+        if duration is not None:
+            raise ConfigError(f"--duration: applies to task files only, not to {name}")
+        return import_task(name)
+    return FileTask.load(name, duration)

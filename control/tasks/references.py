@@ -13,8 +13,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ..trajectory import JointTrajectory, TrajectoryPoint
-from .profile import JerkLimitedSegment
+from ..trajectory import JerkLimitedSegment, JointTrajectory, TrajectoryPoint
 from .spec import ReferenceSpec, Wave
 from .table import Table
 

@@ -30,8 +30,9 @@ from servotau.hal.types import RobotInfo
 from ..config import DEFAULT_PATH
 from ..loop import ControlLoop, LoopHook, LoopResult, Tick
 from ..manager import ControlManager
-from ..trajectory import ForceCompatiblePosture, TrajectoryPoint
-from .build import Phase, Task, check_feasible, resolve_task, task_control_config, task_gains
+from ..trajectory import ForceCompatiblePosture, TrajectoryPoint, stopping_segment
+from .build import Phase, Task, check_feasible, task_control_config, task_gains
+from .plugin import resolve_task
 from .references import Hold
 from .spec import Wave
 
@@ -202,8 +203,6 @@ class TaskRunner(LoopHook):
             return 'start: expected {"task": a task name, file or module:attribute}'
         if self.manager().tripped:
             return "start: a safety trip is latched: reset first"
-        from .profile import stopping_segment
-
         last = self._last or TrajectoryPoint(tick.frame.q.copy(), np.zeros(self.info.nq), np.zeros(self.info.nq))
         stop = stopping_segment(last.q, last.dq, last.ddq, STOP_ACCELERATION, STOP_JERK)
         try:
