@@ -131,7 +131,8 @@ def test_a_jerk_limited_phase_shorter_than_its_trajectory_is_refused(tmp_path, r
         """
     task = FileTask(load_task(write(tmp_path, text)))
     with pytest.raises(InfeasibleTask, match=r'phase "reach": duration 0.2 s is shorter than its time-optimal '
-                                             r"trajectory \(0.800 s within max_velocity, max_acceleration, max_jerk\): expected >= 0.800 s"):
+                                             r"trajectory \(0.800 s within max_velocity, max_acceleration, "
+                                             r"max_jerk\): expected >= 0.800 s"):
         TaskRunner(task, robot[0]).prepare(robot[1])
 
 
