@@ -61,10 +61,11 @@ def run(task, scenario="hanging", ft_offsets=None, hooks=(), operator=None, writ
         backend.close()
 
 
-@pytest.mark.parametrize("name, duration", [pytest.param("swing", 2.0, marks=pytest.mark.slow),
-                                            ("table_example", None)])
+@pytest.mark.slow
+@pytest.mark.parametrize("name, duration", [("swing", 2.0), ("table_example", None)])
 def test_a_shipped_motion_task_runs_to_its_end(name, duration):
-    """(The swing runs in the default suite through servotau control's session: tests/test_apps.py.)"""
+    """(In the default suite the swing runs through servotau control's session, tests/test_apps.py, and the table
+    example through examples/run_task.py, tests/test_control_tasks_example.py.)"""
     result, runner, record, _ = run(FileTask.load(name, duration).shortened(0.25, settle=SETTLE))
     assert result.end == "completed" and result.tripped is None
     assert runner.phase_name == "done" and record.phases[-1] == "tail"
