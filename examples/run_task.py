@@ -31,22 +31,25 @@ from servotau.hal.registry import open_backend
 
 
 class KneeWave(Task):
-    """Bend the right knee by 0.3 rad (jerk-limited, time-optimal), wave it in torque mode, hold."""
+    """Bend the right knee by 0.3 rad (jerk-limited, time-optimal), wave it in torque mode for whole periods (the
+    wave ends where it began: the next phase starts there, as the feasibility check requires), hold."""
 
     name = "knee_wave"
     settle = 0.5  # [s]
+    frequency = 2.0  # [Hz]
 
-    def __init__(self, wave_seconds: float = 1.0):
-        self.wave_seconds = wave_seconds
+    def __init__(self, periods: int = 2):
+        self.periods = periods
 
     def phases(self, info, q_start):
         knee = info.joint_index("RLEG_JOINT3")
         bent = np.array(q_start, dtype=float)
         bent[knee] += 0.3  # [rad]
         move = JerkLimited(q_start, [bent], v_max=1.0, a_max=5.0, j_max=50.0)
-        wave = Sinusoids(bent, info.joint_names, {"RLEG_JOINT3": Wave(amplitude=0.05, frequency=1.0, ramp=0.2)})
+        wave = Sinusoids(bent, info.joint_names, {"RLEG_JOINT3": Wave(amplitude=0.03, frequency=self.frequency,
+                                                                        ramp=0.25)})
         return [Phase("bend", move, "position"),
-                Phase("wave", wave, "torque", duration=self.wave_seconds),
+                Phase("wave", wave, "torque", duration=self.periods / self.frequency),
                 Phase("hold", Hold(bent), "torque", duration=0.3)]
 
 
@@ -57,11 +60,11 @@ def run(backend, task: Task, progress=print):
     return runner.run(loop)
 
 
-def main(argv=None, settle: float | None = None, wave_seconds: float = 1.0, progress=print) -> list:
+def main(argv=None, settle: float | None = None, periods: int = 2, progress=print) -> list:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--task", help="a task name, file or module:attribute (default: KneeWave, then table_example)")
     args = ap.parse_args(argv)
-    tasks = [resolve_task(args.task)] if args.task else [KneeWave(wave_seconds), FileTask.load("table_example")]
+    tasks = [resolve_task(args.task)] if args.task else [KneeWave(periods), FileTask.load("table_example")]
     results = []
     for task in tasks:
         if settle is not None:  # quick runs (the example's test)

@@ -225,3 +225,17 @@ def test_a_user_task_by_import_path_and_the_errors_when_it_cannot_be(tmp_path, m
             import_task("nosuchpkg_xyz.tasks:Task")
     finally:
         sys.modules.pop("mytasks", None)
+
+
+def test_a_reference_jump_between_phases_is_refused(robot):
+    """A Python task whose second phase does not start where the first ends (a sinusoid cut mid-period)."""
+    from servotau.control.tasks import Hold, Phase, Sinusoids, Task, Wave
+
+    class Cut(Task):
+        def phases(self, info, q):
+            wave = Sinusoids(q, info.joint_names, {"RLEG_JOINT3": Wave(0.05, 1.0)})
+            return [Phase("wave", wave, duration=0.25), Phase("hold", Hold(q), duration=0.1)]
+
+    with pytest.raises(InfeasibleTask, match=r'phase "hold" starts 0.050 rad away from where phase "wave" ends on '
+                                             r"RLEG_JOINT3"):
+        TaskRunner(Cut(), robot[0]).prepare(robot[1])

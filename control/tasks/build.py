@@ -117,8 +117,10 @@ class FileTask(Task):
                     replace(w, at=w.at * scale) for w in ref_waypoints(p, ref)))), info, q0, q_start)
             if isinstance(ref, JerkLimited) and short is not None and duration is not None:
                 duration = max(duration, ref.optimal)
-            out.append(Phase(p.name, ref, p.mode, duration, p.force, dict(p.gains)))
-            q0 = ref.end if not (p.force is not None and p.force.posture == "compatible") else q0
+            phase = Phase(p.name, ref, p.mode, duration, p.force, dict(p.gains))
+            out.append(phase)
+            if not (p.force is not None and p.force.posture == "compatible"):  # else: near q0 (max_displacement)
+                q0 = ref.sample(phase.length).q.copy() if phase.length is not None else ref.end
         return out
 
     def _reference(self, p, info: RobotInfo, q0: np.ndarray, q_task: np.ndarray) -> JointReference:
@@ -154,9 +156,18 @@ def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits:
     """
     names, margin = info.joint_names, limits.joint_limit_margin
     lo_lim, hi_lim = info.q_min + margin, info.q_max - margin
+    before: Phase | None = None
     for p in phases:
         where = f'{task.source}: phase "{p.name}"'
         ref = p.reference
+        if before is not None and before.length is not None and not (
+                before.force is not None and before.force.posture == "compatible"):
+            jump = np.abs(ref.sample(0.0).q - before.reference.sample(before.length).q)
+            if jump.max() > START_TOLERANCE:
+                i = int(np.argmax(jump))
+                raise InfeasibleTask(f'{where} starts {jump[i]:.3f} rad away from where phase "{before.name}" ends on '
+                                     f"{names[i]}: expected within {START_TOLERANCE} rad (a reference without jumps)")
+        before = p
         if isinstance(ref, JerkLimited) and p.duration is not None and p.duration < ref.optimal - 1e-9:
             raise InfeasibleTask(f"{where}: duration {p.duration:g} s is shorter than its time-optimal trajectory "
                                  f"({ref.optimal:.3f} s within max_velocity, max_acceleration, max_jerk): expected "
