@@ -64,6 +64,7 @@ log = logging.getLogger(__name__)
 
 SETTLE = 0.5  # [s] in position mode before the run's mode: filters fill, F/T offsets are calibrated
 STOP_ACCELERATION, STOP_JERK = 5.0, 50.0  # [rad/s^2, rad/s^3] bounds of the reference's stop (request_stop)
+DETAIL_TICKS = 100  # the operator's status detail (robot time, mode, phase) is refreshed every this many ticks
 ESTIMATOR_VARIANT = "low_delay"  # the estimator variant the torque controller is stable with in simulation
 
 
@@ -168,6 +169,7 @@ class ControlLoop:
         self.hold: TrajectoryPoint | None = None  # the start posture, at rest (set by start())
         self._stop_requested = False
         self.state = "starting"  # the operator states (control/operator.py STATES)
+        self.describe: Callable[[], dict] = dict  # more of the status detail, e.g. a task runner's phase
 
     def request_stop(self) -> None:
         """Stop the run smoothly (module doc), from any thread or a signal handler: taken at the next tick."""
@@ -282,8 +284,10 @@ class ControlLoop:
                         h.tripped(tick, manager.report)
                 self.state = state
                 if operator is not None:
-                    operator.publish(state, manager.report.message if manager.tripped else None,
-                                     {"time": float(frame.time), "mode": manager.mode.value})
+                    detail = None
+                    if k % DETAIL_TICKS == 0:  # status's detail, refreshed every DETAIL_TICKS ticks
+                        detail = {"time": float(frame.time), "mode": manager.mode.value, **self.describe()}
+                    operator.publish(state, manager.report.message if manager.tripped else None, detail)
                     pending = operator.take()
                     if pending is not None:
                         if pending.action == "release":

@@ -122,7 +122,12 @@ class TaskRunner(LoopHook):
     def run(self, loop: ControlLoop, **kwargs) -> LoopResult:
         """Check the task on the first frame, then run it on ``loop`` (``kwargs``: of :meth:`ControlLoop.run`)."""
         self.prepare(loop.start().q)
-        return loop.run(self.reference, None, actions={"start": self.start_request}, **kwargs)
+        self.attach(loop)
+        return loop.run(self.reference, None, actions=self.actions, **kwargs)
+
+    def attach(self, loop: ControlLoop) -> None:
+        """The loop's status detail says the task and the phase."""
+        loop.describe = lambda: {"task": self.task.name, "phase": self.phase_name}
 
     @property
     def actions(self) -> dict:

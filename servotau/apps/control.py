@@ -236,6 +236,7 @@ def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = 
     if status:
         loop.hooks = (*loop.hooks, StatusLine(loop, progress, runner))
     runner.prepare(loop.start().q)  # InfeasibleTask before the first command
+    runner.attach(loop)
     if loop_ready is not None:
         loop_ready(loop)
     jump = np.zeros(info.nq)
