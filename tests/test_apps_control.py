@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 
 from servotau.apps.control import main as control_main
@@ -61,6 +62,25 @@ def test_ctrl_c_stops_smoothly_and_closes_the_log(tmp_path, monkeypatch, capsys)
     assert log.exists() and not parts_dir(log).exists()
     reader = LogReader(log)
     assert len(reader.columns["t"]) == 200 + 501 + 501 and reader.has_truth  # settle, to the stop, stop + fade
+    from servotau.identification.workbench import load_dataset  # the workbench reads the truth it maps
+
+    ds = load_dataset(log, joint="RLEG_JOINT3", roles={"torque": "true/tau/RLEG_JOINT3"})
+    true = reader.columns["true/tau/RLEG_JOINT3"][-len(ds.signals["tau"]):]  # after the rows it drops
+    assert np.abs(ds.signals["tau"] - true).max() < 1e-3  # [N m] its torque smoothing, no estimation error
+
+
+def test_ft_offsets_from_a_file_name_the_sensor(tmp_path):
+    from servotau.apps.control import load_ft_offsets
+    from servotau.simrobot.sim import SimConfig, SimRobot
+
+    info = SimRobot(SimConfig.named("hanging", seed=0)).info
+    rows = {s: [float(i), 0, 0, 0, 0, 0] for i, s in enumerate(info.ft_sensor_names)}
+    path = tmp_path / "ft.toml"
+    path.write_text("\n".join(f"{s} = {v}" for s, v in rows.items()))
+    assert np.array_equal(load_ft_offsets(str(path), info)([]), np.array(list(rows.values())))
+    path.write_text(f"{info.ft_sensor_names[0]} = [1, 2, 3]")
+    with pytest.raises(Exception, match=rf"field '{info.ft_sensor_names[0]}' = \[1, 2, 3\]: expected a list of 6"):
+        load_ft_offsets(str(path), info)
 
 
 def test_an_infeasible_task_is_refused_before_anything_moves(tmp_path, capsys):
