@@ -175,6 +175,21 @@ def test_a_table_missing_a_column_of_the_task_names_it(tmp_path, robot):
         TaskRunner(task, robot[0]).prepare(robot[1])
 
 
+def test_a_phase_shorter_than_its_table_is_refused(tmp_path, robot):
+    (tmp_path / "m.csv").write_text(TABLE)
+    text = """
+        [[phases]]
+        name = "play"
+        duration = 0.5
+        [phases.reference]
+        type = "table"
+        file = "m.csv"
+        relative = true
+        """
+    with pytest.raises(InfeasibleTask, match=r'phase "play": duration 0.5 s is shorter than its table .*m.csv \(1 s\)'):
+        TaskRunner(FileTask(load_task(write(tmp_path, text))), robot[0]).prepare(robot[1])
+
+
 def test_a_table_reads_from_parquet_as_from_csv(tmp_path, robot):
     import pyarrow as pa
     import pyarrow.parquet as pq

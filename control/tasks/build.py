@@ -172,6 +172,9 @@ def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits:
             raise InfeasibleTask(f"{where}: duration {p.duration:g} s is shorter than its time-optimal trajectory "
                                  f"({ref.optimal:.3f} s within max_velocity, max_acceleration, max_jerk): expected "
                                  f">= {ref.optimal:.3f} s")
+        if isinstance(ref, Tabled) and p.duration is not None and p.duration < ref.duration - 1e-9:
+            raise InfeasibleTask(f"{where}: duration {p.duration:g} s is shorter than its table {ref.table.file} "
+                                 f"({ref.duration:g} s): expected >= {ref.duration:g} s, or no duration")
         if isinstance(ref, Tabled):
             jump = np.abs(ref.first - ref.q0[ref.index])
             if jump.max() > START_TOLERANCE:
