@@ -125,7 +125,7 @@ def test_the_identification_task_sweeps_then_returns():
 def test_the_whole_identification_task_runs_shortened():
     result, runner, record, _ = run(FileTask.load("identification").shortened(0.25, settle=SETTLE))
     assert result.end == "completed" and result.tripped is None and runner.phase_name == "done"
-    assert len(set(record.phases)) == 18
+    assert len(set(record.phases) - {"settle"}) == 18
 
 
 def test_an_infeasible_task_sends_nothing():
