@@ -231,3 +231,28 @@ def test_the_operator_starts_another_task_from_rest(tmp_path):
     assert not answers["refused"].ok and "start no_such_task: " in answers["refused"].error
     assert result.end == "completed" and result.tripped is None and record.phases[-1] == "wave"
     assert runner.task.name == "wave"
+
+
+@pytest.mark.slow
+def test_the_force_task_file_reproduces_the_force_experiment():
+    """config/tasks/force.toml, whole (1 s hold, 6 s of the sinusoid): the apex error of the measured force within
+    5 % of the amplitude, as `servotau experiment force` (docs/results.md)."""
+    from servotau.control.loop import estimator_config
+    from servotau.experiments.common import Run, ft_offsets_hanging
+    from servotau.experiments.force import force_metrics
+
+    run_ = Run("force task")
+
+    def at(tick):
+        t = tick.t - 1.0  # from the force phase's start
+        if t >= 0:
+            run_.time.append(t)
+            run_.f_ref.append(np.array(tick.terms.f_d[:3]))
+            run_.f_hat.append(np.array(tick.terms.f_hat[:3]))
+
+    offsets = ft_offsets_hanging(0, estimator_config())
+    result, *_ = run(FileTask.load("force"), "force", lambda frames: offsets, hooks=[Record(at=at)])
+    assert result.end == "completed" and result.tripped is None
+    metrics = force_metrics(run_, "f_hat")
+    print("force task metrics:", metrics)
+    assert abs(metrics["apex_error_pct"]) < 5.0, metrics
