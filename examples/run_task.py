@@ -60,15 +60,16 @@ def run(backend, task: Task, progress=print):
     return runner.run(loop)
 
 
-def main(argv=None, settle: float | None = None, periods: int = 2, progress=print) -> list:
+def main(argv=None, quick: bool = False, progress=print) -> list:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--task", help="a task name, file or module:attribute (default: KneeWave, then table_example)")
     args = ap.parse_args(argv)
-    tasks = [resolve_task(args.task)] if args.task else [KneeWave(periods), FileTask.load("table_example")]
+    tasks = [resolve_task(args.task)] if args.task else [KneeWave(1 if quick else 2), FileTask.load("table_example")]
     results = []
     for task in tasks:
-        if settle is not None:  # quick runs (the example's test)
-            task.settle = settle
+        if quick:  # the example's test: the settle phase 0.2 s, a file task's timed phases cut to 0.25 s
+            task = task.shortened(0.25, settle=0.2) if isinstance(task, FileTask) else task
+            task.settle = 0.2
         backend = open_backend("hal.toml", backend="inprocess")  # the simulator in this process
         try:
             result = run(backend, task, progress)

@@ -14,7 +14,7 @@ def test_the_example_runs_its_tasks_to_their_end():
     example = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(example)
     lines = []
-    results = example.main([], settle=0.2, periods=1, progress=lines.append)
+    results = example.main([], quick=True, progress=lines.append)
     assert [r.end for r in results] == ["completed", "completed"] and all(r.tripped is None for r in results)
     assert any("phase 2/3 wave: torque mode" in line for line in lines)
-    assert any("phase 1/2 table: position mode, 2.00 s" in line for line in lines)
+    assert any("phase 1/2 table: position mode, 1.00 s" in line for line in lines)
