@@ -58,7 +58,12 @@ def ref_waypoints(p, ref: MinJerk):
 
 
 class Task:
-    """What a task provides (user tasks implement :meth:`phases`; ``--task mypkg.mytask:Task``)."""
+    """What a task provides (user tasks implement :meth:`phases`; ``--task mypkg.mytask:Task``).
+
+    ``phases(info, q_start)`` builds the phases on the start posture (n,) [rad]. The runner also calls it once
+    with a zero posture before the first frame, to read the run's gains and force task (the controller is built
+    before the robot is read): the gains must not depend on the posture.
+    """
 
     name: str = "task"
     settle: float = 0.5  # [s] position mode at the start posture: filters fill, F/T offsets calibrated
