@@ -1,6 +1,7 @@
-"""Tasks end to end on the in-process simulator: every shipped task (cut short: FileTask.shortened, the settle
-phase 0.2 s), an infeasible task refused with nothing sent, the smooth stop, a bumpless mode switch by the
-operator, an operator's start of another task, and the ground truth in the controller's log."""
+"""Tasks end to end on the in-process simulator: the shipped tasks (cut short: FileTask.shortened, the settle
+phase 0.2 s; the swing and the table example in tests/test_apps.py and tests/test_control_tasks_example.py, the hold
+and Ctrl-C in tests/test_apps_control.py), an infeasible task refused with nothing sent, a bumpless mode switch by
+the operator and the smooth stop, an operator's start of another task."""
 
 from __future__ import annotations
 
@@ -14,7 +15,6 @@ from servotau.control.loop import ControlLoop, LoopHook
 from servotau.control.operator import OperatorChannel
 from servotau.control.tasks import FileTask, InfeasibleTask, TaskRunner
 from servotau.hal.backends.inprocess import InProcessBackend
-from servotau.hal.log import LogReader, LogWriter
 from servotau.simrobot.sim import SimConfig, SimRobot
 
 SETTLE = 0.2  # [s] of the shortened tasks
@@ -138,31 +138,6 @@ def test_an_infeasible_task_sends_nothing():
         assert backend.writes == 0 and backend.robot.seq == 0
     finally:
         backend.close()
-
-
-def test_hold_until_stopped_comes_to_rest_in_position_mode_and_closes_the_log(tmp_path):
-    """The hold task runs until stopped (here 0.1 s after the settle phase, as Ctrl-C does): the run ends
-    ``stopped`` after the switch's fade, its log closed with every tick and the ground truth (true/*)."""
-    path = tmp_path / "hold.parquet"
-    writer = LogWriter(path, SimRobot(SimConfig.named("hanging", seed=0)).info)
-    loops = []
-    stopper = Record(at=lambda tick: loops[0].request_stop() if abs(tick.t - 0.1) < 1e-9 else None)
-    task = FileTask.load("hold").shortened(0.25, settle=SETTLE)
-    backend = InProcessBackend(SimRobot(SimConfig.named("hanging", seed=0)))
-    try:
-        runner = TaskRunner(task, backend.info)
-        loop = ControlLoop(backend, runner.manager(), hooks=[runner, LogHook(writer), stopper], settle=task.settle)
-        loops.append(loop)
-        result = runner.run(loop)
-    finally:
-        writer.close()
-        backend.close()
-    assert result.end == "stopped" and result.tripped is None
-    assert result.ticks == 200 + 101 + 501  # settle, to the stop, its next tick and the fade (0.5 s)
-    log = LogReader(path)
-    assert len(log.columns["t"]) == result.ticks and log.has_truth
-    tau = log.joints("true/tau")
-    assert np.all(np.isfinite(tau)) and np.abs(tau[:, backend.info.joint_index("RLEG_JOINT3")]).max() > 1.0
 
 
 def test_the_operator_switches_to_torque_bumplessly_then_stops():
