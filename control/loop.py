@@ -16,7 +16,7 @@ Phases:
 - reference: the run's ``mode`` is requested on the first tick after the settle phase (the manager
   switches bumplessly), then ``reference(tick)`` gives the desired joint state every tick until
   ``duration`` [s] of robot time has passed or the safety monitor trips.
-- reference: ``reference(tick)`` returning None ends the run (``completed``: a task's last phase is over);
+- end: ``reference(tick)`` returning None ends the run (``completed``: a task's last phase is over);
   ``duration`` None runs until then, or until stopped.
 - stop (``request_stop()``, Ctrl-C, the operator's ``stop``): the reference comes to rest within
   :data:`STOP_ACCELERATION` and :data:`STOP_JERK` from its last state (jerk-limited), the manager switches to
