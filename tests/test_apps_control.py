@@ -51,7 +51,8 @@ def test_ctrl_c_stops_smoothly_and_closes_the_log(tmp_path, monkeypatch, capsys)
     monkeypatch.syspath_prepend(str(tmp_path))
     log = tmp_path / "run.parquet"
     try:
-        code = control("--task", "interrupted_task:Task", "--log", str(log))
+        code = control("--task", "interrupted_task:Task", "--log", str(log), "--save-ft-offsets",
+                       str(tmp_path / "ft.toml"))
     finally:
         sys.modules.pop("interrupted_task", None)
     out, err = capsys.readouterr()
@@ -62,6 +63,10 @@ def test_ctrl_c_stops_smoothly_and_closes_the_log(tmp_path, monkeypatch, capsys)
     assert log.exists() and not parts_dir(log).exists()
     reader = LogReader(log)
     assert len(reader.columns["t"]) == 200 + 501 + 501 and reader.has_truth  # settle, to the stop, stop + fade
+    from servotau.apps.control import load_ft_offsets  # the offsets calibrated while settling, for --ft-offsets
+
+    offsets = load_ft_offsets(str(tmp_path / "ft.toml"), reader.info)([])
+    assert offsets.shape == (4, 6) and np.all(np.isfinite(offsets)) and np.abs(offsets).max() > 0
     from servotau.identification.workbench import load_dataset  # the workbench reads the truth it maps
 
     ds = load_dataset(log, joint="RLEG_JOINT3", roles={"torque": "true/tau/RLEG_JOINT3"})
@@ -102,3 +107,33 @@ def test_a_task_that_cannot_be_loaded_is_a_one_line_error(task, message, capsys)
     argv = ["--task", task] + (["--duration", "2"] if task == "hold" else [])
     assert control(*argv) == 2
     assert message in capsys.readouterr().err
+
+
+def test_the_log_keeps_truth_columns_when_the_first_frames_have_none(tmp_path):
+    """Over Zenoh the truth of the first frame never arrives: the log hook holds the rows back until a row has
+    truth (those before it hold NaN there); a backend without truth gives a log without true/* columns."""
+    from types import SimpleNamespace
+
+    from servotau.apps.control import LogHook
+    from servotau.hal.log import LogWriter
+    from servotau.simrobot.sim import SimConfig, SimRobot
+
+    sim = SimRobot(SimConfig.named("hanging", seed=0))
+    for truth_from, path in ((3, tmp_path / "late.parquet"), (None, tmp_path / "none.parquet")):
+        writer = LogWriter(path, sim.info)
+        hook = LogHook(writer)
+        for k in range(6):
+            frame = sim.read()
+            truth = sim.ground_truth() if truth_from is not None and k >= truth_from else None
+            est = SimpleNamespace(tau=np.zeros(sim.info.nq), dq=np.zeros(sim.info.nq))
+            hook.on_tick(SimpleNamespace(frame=frame, terms=SimpleNamespace(q_des=frame.q), truth=truth, estimate=est))
+            sim.step(frame.q)
+        hook.flush()
+        writer.close()
+        reader = LogReader(path)
+        assert len(reader.columns["t"]) == 6
+        if truth_from is None:
+            assert not any(c.startswith("true/") for c in reader.columns)
+        else:
+            tau = reader.joints("true/tau")
+            assert np.isnan(tau[:3]).all() and np.isfinite(tau[3:]).all()

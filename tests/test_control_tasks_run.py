@@ -10,7 +10,6 @@ import threading
 import numpy as np
 import pytest
 
-from servotau.apps.control import LogHook
 from servotau.control.loop import ControlLoop, LoopHook
 from servotau.control.operator import OperatorChannel
 from servotau.control.tasks import FileTask, InfeasibleTask, TaskRunner
@@ -47,13 +46,12 @@ class Record(LoopHook):
             self.at(tick)
 
 
-def run(task, scenario="hanging", ft_offsets=None, hooks=(), operator=None, writer=None):
+def run(task, scenario="hanging", ft_offsets=None, hooks=(), operator=None):
     backend = Counting(SimRobot(SimConfig.named(scenario, seed=0)))
     try:
         runner = TaskRunner(task, backend.info)
         record = Record(runner)
-        extra = [LogHook(writer)] if writer is not None else []
-        loop = ControlLoop(backend, runner.manager(), hooks=[runner, record, *extra, *hooks], settle=task.settle,
+        loop = ControlLoop(backend, runner.manager(), hooks=[runner, record, *hooks], settle=task.settle,
                            ft_offsets=runner.ft_offsets(ft_offsets))
         result = runner.run(loop, operator=operator)
         return result, runner, record, backend

@@ -80,16 +80,39 @@ class TrackingError(LoopHook):
 
 
 class LogHook(LoopHook):
-    """Every tick into a :class:`~servotau.hal.log.LogWriter`: frame, command, ground truth, estimated tau and dq."""
+    """Every tick into a :class:`~servotau.hal.log.LogWriter`: frame, command, ground truth, estimated tau and dq.
+
+    Whether the log has ground-truth columns (``true/*``) is decided by the first :data:`TRUTH_PROBE` ticks: a
+    backend's truth may miss the first frames (over Zenoh the robot publishes frame 0's before the controller
+    listens), so the rows wait until one has truth, or until the probe ends (then no truth columns). Call
+    :meth:`flush` at the end of a run shorter than the probe.
+    """
 
     wants_truth = True
+    TRUTH_PROBE = 50  # [ticks]
 
     def __init__(self, writer):
         self.writer = writer
+        self._rows: list | None = None if writer.truth_decided else []
 
     def on_tick(self, tick: Tick) -> None:
         e = tick.estimate
-        self.writer.append(tick.frame, tick.terms.q_des, tick.truth, {"est/tau": e.tau, "est/dq": e.dq})
+        if self._rows is None:
+            self.writer.append(tick.frame, tick.terms.q_des, tick.truth, {"est/tau": e.tau, "est/dq": e.dq})
+            return
+        self._rows.append((tick.frame, tick.terms.q_des.copy(), tick.truth,
+                           {"est/tau": e.tau.copy(), "est/dq": e.dq.copy()}))
+        if tick.truth is not None or len(self._rows) >= self.TRUTH_PROBE:
+            self.flush()
+
+    def flush(self) -> None:
+        """Decide the truth columns (a row with truth so far) and write the rows held back."""
+        if self._rows is None:
+            return
+        rows, self._rows = self._rows, None
+        self.writer.set_truth(any(r[2] is not None for r in rows))
+        for row in rows:
+            self.writer.append(*row)
 
 
 class RerunHook(LoopHook):
@@ -118,6 +141,22 @@ class RerunHook(LoopHook):
         self.stream.add(frame.time, **signals)
         base = (truth.base_position, truth.base_quat_wxyz) if truth is not None else (None, None)
         self.stream.robot(frame.time, frame.q, *base)
+
+
+class SaveOffsets(LoopHook):
+    """Writes the F/T offsets in use after the settle phase to a TOML file ``sensor = [fx, fy, fz, tx, ty, tz]``
+    [N, N m] (what :func:`load_ft_offsets` reads)."""
+
+    def __init__(self, path: str, estimator, sensor_names):
+        self.path, self.estimator, self.sensor_names = path, estimator, tuple(sensor_names)
+
+    def settled(self, tick: Tick) -> None:
+        lines = ["# F/T offsets [N, N m] calibrated in the settle phase of servotau control "
+                 f"(robot time {tick.frame.time:.3f} s); servotau control --ft-offsets reads them"]
+        for name, row in zip(self.sensor_names, self.estimator.ft_offsets, strict=True):
+            lines.append(f"{name} = [{', '.join(repr(float(v)) for v in row)}]")
+        with open(self.path, "w", encoding="utf-8") as f:
+            f.write("\n".join(lines) + "\n")
 
 
 class _ModeOverride(Task):
@@ -166,6 +205,9 @@ def register(sub) -> None:
     p.add_argument("--ft-offsets", default=None, metavar="FILE",
                    help='TOML of F/T offsets [N, N m], sensor = [fx, fy, fz, tx, ty, tz], for tasks with '
                         'settle.ft_offsets = "external" (measured with the feet free)')
+    p.add_argument("--save-ft-offsets", default=None, metavar="FILE",
+                   help="write the F/T offsets calibrated in the settle phase to FILE (TOML, for --ft-offsets: "
+                        "calibrate with the feet free, e.g. hanging, then run a task on the loaded feet)")
     p.add_argument("--log", default=None, help="Parquet log path")
     p.add_argument("--rerun", default="off", help="save:FILE | connect:ADDR | spawn | off")
     p.add_argument("--quiet", action="store_true", help="no status line once a second")
@@ -191,7 +233,7 @@ def load_ft_offsets(path: str, info) -> Callable:
 def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = None, duration: float | None = None,
                 stream: RerunStream | None = None, writer=None, progress=print, operator: OperatorChannel | None = None,
                 hold_timeout: float | None = 0.0, hint: str = "", trip_at: float | None = None,
-                ft_offsets: Callable | None = None, status: bool = False,
+                ft_offsets: Callable | None = None, status: bool = False, save_ft_offsets: str | None = None,
                 loop_ready: Callable[[ControlLoop], None] | None = None) -> SessionResult:
     """Settle, then run ``task`` (:class:`~servotau.control.tasks.TaskRunner` on a
     :class:`~servotau.control.loop.ControlLoop`) until it ends, is stopped or released.
@@ -211,6 +253,7 @@ def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = 
             robot time after the settle phase on (a command_error trip), or None.
         ft_offsets: The loop's F/T offsets (``f(settle_frames)``) for tasks with external offsets.
         status: Print the status line once a second of robot time.
+        save_ft_offsets: Write the F/T offsets in use after the settle phase to this TOML file.
         loop_ready: Called with the loop once built (e.g. to stop it from a signal handler).
 
     Raises:
@@ -227,14 +270,17 @@ def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = 
     runner = TaskRunner(task, info, progress=progress)
     error = TrackingError(info.nq)
     hooks = [runner, error, _TripNotice(progress, hint or "stopping")]
-    if writer is not None:
-        hooks.append(LogHook(writer))
+    log_hook = LogHook(writer) if writer is not None else None
+    if log_hook is not None:
+        hooks.append(log_hook)
     if stream is not None:
         hooks.append(RerunHook(stream, info.ft_sensor_names))
     loop = ControlLoop(backend, runner.manager(), hooks=hooks, settle=task.settle,
                        ft_offsets=runner.ft_offsets(ft_offsets))
     if status:
         loop.hooks = (*loop.hooks, StatusLine(loop, progress, runner))
+    if save_ft_offsets:
+        loop.hooks = (*loop.hooks, SaveOffsets(save_ft_offsets, loop.estimator, info.ft_sensor_names))
     runner.prepare(loop.start().q)  # InfeasibleTask before the first command
     runner.attach(loop)
     if loop_ready is not None:
@@ -248,7 +294,11 @@ def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = 
             point = dataclasses.replace(point, q=point.q + jump)
         return point
 
-    result = loop.run(reference, None, operator=operator, hold_timeout=hold_timeout, actions=runner.actions)
+    try:
+        result = loop.run(reference, None, operator=operator, hold_timeout=hold_timeout, actions=runner.actions)
+    finally:
+        if log_hook is not None:
+            log_hook.flush()
     return SessionResult(
         ticks=result.ticks, sim_seconds=result.sim_seconds, wall_seconds=result.wall_seconds,
         max_error={j: float(e) for j, e in zip(info.joint_names, error.max, strict=True)},
@@ -354,7 +404,7 @@ def main(args) -> int:
                            realtime=_on_wall_clock(backend)) if args.log else None
         result = run_session(backend, task=task, mode=args.mode, stream=stream, writer=writer,
                              operator=operator, hold_timeout=args.hold_timeout, hint=hint, trip_at=args.trip_at,
-                             ft_offsets=offsets, status=not args.quiet,
+                             ft_offsets=offsets, status=not args.quiet, save_ft_offsets=args.save_ft_offsets,
                              loop_ready=lambda loop: setattr(signals, "loop", loop))
     except HalError as exc:
         print(f"servotau control: robot lost: {exc}", file=sys.stderr)
