@@ -16,12 +16,20 @@ Phases:
 - reference: the run's ``mode`` is requested on the first tick after the settle phase (the manager
   switches bumplessly), then ``reference(tick)`` gives the desired joint state every tick until
   ``duration`` [s] of robot time has passed or the safety monitor trips.
+- end: ``reference(tick)`` returning None ends the run (``completed``: a task's last phase is over);
+  ``duration`` None runs until then, or until stopped.
+- stop (``request_stop()``, Ctrl-C, the operator's ``stop``): the reference comes to rest within
+  :data:`STOP_ACCELERATION` and :data:`STOP_JERK` from its last state (jerk-limited), the manager switches to
+  position mode (bumpless: the switch offset fades over ``fade_time``), and once both are done the run ends
+  (``stopped``). A stop while a trip is latched ends the run at once (the hold was written).
 - hold (after a trip): the manager holds the last valid measured posture (torque terms zero, integrals
   frozen) and the loop keeps answering every frame, reporting the trip once (:meth:`LoopHook.tripped`),
   until an operator acts through an :class:`~servotau.control.operator.OperatorChannel`: ``reset`` (refused
   while the trip's cause is still there) goes back to position control at the held posture, which the loop
   then keeps; ``release`` ends the run. ``hold_timeout`` [s] of robot time without a release ends it too
   (default 0: the loop stops on the tripping tick, after writing the hold).
+- operator: ``position``/``torque`` request that mode (refused while a trip is latched); other actions go to
+  ``actions`` (e.g. a task runner's ``start``).
 
 Time is the robot's: a tick's ``t`` and the phases count robot ticks from the first frame (``frame.seq``), so
 frames skipped by a late controller shorten neither the settle phase nor the run, and the estimator fills
@@ -37,11 +45,12 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from servotau.errors import ServotauError
 from servotau.estimation import Estimate, EstimatorConfig, FtOffsetAverage, TorqueEstimator
 from servotau.hal.types import SensorFrame
 
@@ -49,11 +58,13 @@ from .manager import ControlManager, Mode
 from .operator import OperatorChannel
 from .safety import SafetyReport
 from .terms import ControlTerms
-from .trajectory import TrajectoryPoint
+from .trajectory import TrajectoryPoint, stopping_segment
 
 log = logging.getLogger(__name__)
 
 SETTLE = 0.5  # [s] in position mode before the run's mode: filters fill, F/T offsets are calibrated
+STOP_ACCELERATION, STOP_JERK = 5.0, 50.0  # [rad/s^2, rad/s^3] bounds of the reference's stop (request_stop)
+DETAIL_TICKS = 100  # the operator's status detail (robot time, mode, phase) is refreshed every this many ticks
 ESTIMATOR_VARIANT = "low_delay"  # the estimator variant the torque controller is stable with in simulation
 
 
@@ -112,7 +123,7 @@ class LoopResult:
     wall_seconds: float  # [s] wall time of the run
     tripped: str | None  # the first safety report's message, or None
     robot_ticks: int = 0  # robot ticks from the first frame to the last (ticks + skipped frames)
-    end: str = "completed"  # "completed" (the run's duration), "released" (by the operator), "hold_timeout"
+    end: str = "completed"  # "completed" (duration or task over), "stopped", "released" (operator), "hold_timeout"
     trips: int = 0  # safety trips (a reset hold can trip again)
     resets: int = 0  # trips cleared by an operator's reset
     gaps: int = 0  # gaps of skipped frames (the estimator's count)
@@ -125,7 +136,8 @@ class LoopResult:
         return self.robot_ticks * self.period
 
 
-Reference = Callable[[Tick], TrajectoryPoint]
+Reference = Callable[[Tick], TrajectoryPoint | None]
+Action = Callable[[dict, Tick], str | None]  # an operator action's handler: None (done) or why it is refused
 
 
 class ControlLoop:
@@ -157,6 +169,13 @@ class ControlLoop:
         self._ft_offsets = ft_offsets
         self._frame: SensorFrame | None = None
         self.hold: TrajectoryPoint | None = None  # the start posture, at rest (set by start())
+        self._stop_requested = False
+        self.state = "starting"  # the operator states (control/operator.py STATES)
+        self.describe: Callable[[], dict] = dict  # more of the status detail, e.g. a task runner's phase
+
+    def request_stop(self) -> None:
+        """Stop the run smoothly (module doc), from any thread or a signal handler: taken at the next tick."""
+        self._stop_requested = True
 
     def start(self) -> SensorFrame:
         """Read the first frame (once): its ``q`` is the start posture held while settling."""
@@ -166,14 +185,14 @@ class ControlLoop:
             self.hold = TrajectoryPoint(self._frame.q.copy(), np.zeros(n), np.zeros(n))
         return self._frame
 
-    def run(self, reference: Reference | None, duration: float, *, operator: OperatorChannel | None = None,
-            hold_timeout: float | None = 0.0) -> LoopResult:
+    def run(self, reference: Reference | None, duration: float | None, *, operator: OperatorChannel | None = None,
+            hold_timeout: float | None = 0.0, actions: Mapping[str, Action] | None = None) -> LoopResult:
         """Settle, then ``duration`` [s] of robot time in the run's mode following ``reference(tick)`` (None: hold
         the start); after a safety trip, the latched hold (module doc) until the operator or ``hold_timeout``.
 
         Args:
-            reference: The desired joint state of each tick after the settle phase.
-            duration: [s] robot time after the settle phase.
+            reference: The desired joint state of each tick after the settle phase (None from it: the end).
+            duration: [s] robot time after the settle phase (None: until the reference ends or a stop).
             operator: Where an operator's ``reset``/``release``/``status`` arrive (:mod:`.operator`), or None.
             hold_timeout: [s] robot time the loop keeps holding after a trip (or after a reset) before it releases
                 by itself; None: until the operator releases; 0 (default): it stops on the tripping tick.
@@ -185,10 +204,15 @@ class ControlLoop:
         backend, manager, estimator, hooks = self.backend, self.manager, self.estimator, self.hooks
         names, dt, n_settle = self.info.joint_names, self.info.period, self.settle_ticks
         truth_wanted = any(h.wants_truth for h in hooks)
+        if truth_wanted:  # before the first write: a backend that keeps truth per step (inprocess) starts keeping it
+            backend.ground_truth()
         clock = time.perf_counter_ns
         settle_frames: list[SensorFrame] = []  # for a given ft_offsets function
         average = FtOffsetAverage(self.info, estimator.ft_offsets) if self._ft_offsets is None else None
-        total = n_settle + int(round(duration / dt))
+        total = n_settle + int(round(duration / dt)) if duration is not None else None
+        actions = dict(actions or {})
+        stopping = None  # (stop segment, robot time [s] of the stop) while stopping
+        last_ref: TrajectoryPoint | None = None
         seq0 = frame.seq
         state = "settling" if n_settle else "running"
         calibrated, settled = n_settle == 0, False
@@ -197,6 +221,7 @@ class ControlLoop:
         first_trip: str | None = None
         trips = resets = 0
         end = "completed"
+        self.state = state
         if operator is not None:
             operator.publish(state)
         t_wall = time.perf_counter()
@@ -224,12 +249,25 @@ class ControlLoop:
                         manager.request_mode(self.mode)
                     for h in hooks:
                         h.settled(tick)
+                if self._stop_requested and stopping is None and state != "done":
+                    self._stop_requested = False
+                    if state == "tripped":
+                        end = "stopped"
+                        break
+                    stopping = self._begin_stop(last_ref or self.hold, float(frame.time))
+                    state = "stopping"
                 if held is not None:
                     tick.reference = held
+                elif stopping is not None:
+                    tick.reference = TrajectoryPoint(*stopping[0].sample(float(frame.time) - stopping[1]))
                 elif i < n_settle or reference is None:
                     tick.reference = self.hold
                 else:
                     tick.reference = reference(tick)
+                    if tick.reference is None:  # the task is over
+                        end = "completed"
+                        break
+                last_ref = tick.reference
                 for h in hooks:
                     h.before_control(tick)
                 t0 = clock()
@@ -247,15 +285,44 @@ class ControlLoop:
                     held = TrajectoryPoint(manager.hold_posture.copy(), np.zeros(n), np.zeros(n))
                     for h in hooks:
                         h.tripped(tick, manager.report)
+                self.state = state
                 if operator is not None:
-                    operator.publish(state, manager.report.message if manager.tripped else None)
+                    detail = None
+                    if k % DETAIL_TICKS == 0:  # status's detail, refreshed every DETAIL_TICKS ticks
+                        detail = {"time": float(frame.time), "mode": manager.mode.value, **self.describe()}
+                    operator.publish(state, manager.report.message if manager.tripped else None, detail)
                     pending = operator.take()
                     if pending is not None:
                         if pending.action == "release":
                             operator.answer(pending, True, "released")
                             end = "released"
                             break
-                        if state == "tripped":  # reset
+                        if pending.action == "stop":
+                            if state == "tripped":
+                                operator.answer(pending, True, "stopped")
+                                end = "stopped"
+                                break
+                            if stopping is None:
+                                stopping = self._begin_stop(last_ref, float(frame.time))
+                                state = "stopping"
+                            operator.answer(pending, True, state)
+                        elif pending.action in ("position", "torque"):
+                            refusal = None
+                            if state == "stopping":
+                                refusal = "the run is stopping"
+                            else:
+                                try:
+                                    manager.request_mode(pending.action)
+                                except ServotauError as exc:
+                                    refusal = str(exc)
+                            operator.answer(pending, refusal is None, state, refusal)
+                        elif pending.action in actions:
+                            refusal = "the run is stopping" if state == "stopping" else actions[pending.action](
+                                pending.args, tick)
+                            operator.answer(pending, refusal is None, state, refusal)
+                        elif pending.action != "reset":
+                            operator.answer(pending, False, state, f"{pending.action}: not served by this loop")
+                        elif state == "tripped":  # reset
                             refusal = manager.try_reset()
                             if refusal is None:
                                 state, resets, t_hold = "holding", resets + 1, float(frame.time)
@@ -271,12 +338,25 @@ class ControlLoop:
                             log.warning("no operator release within hold_timeout = %g s of robot time: releasing",
                                         hold_timeout)
                         break
-                elif i >= total - 1:
+                elif stopping is not None:
+                    if float(frame.time) - stopping[1] >= max(stopping[0].duration,
+                                                              manager.config.fade_time) - 1e-9:
+                        end = "stopped"
+                        break
+                elif total is not None and i >= total - 1:
                     break
                 frame = backend.read()
         finally:
             if operator is not None:
-                operator.close({"completed": "done"}.get(end, "released"))
+                operator.close({"completed": "done", "stopped": "stopped"}.get(end, "released"))
+            self.state = {"completed": "done", "stopped": "stopped"}.get(end, "released")
         return LoopResult(ticks=k + 1, period=dt, wall_seconds=time.perf_counter() - t_wall, tripped=first_trip,
                           robot_ticks=i + 1, end=end, trips=trips, resets=resets, gaps=estimator.gaps,
                           missing_frames=estimator.missing_frames, longest_gap=estimator.longest_gap)
+
+    def _begin_stop(self, last: TrajectoryPoint, t: float):
+        """The stop segment from the last reference (module doc) and the switch to position mode."""
+        log.info("stopping at t = %.3f s: the reference comes to rest, position mode", t)
+        if not self.manager.tripped:
+            self.manager.request_mode(Mode.POSITION)
+        return stopping_segment(last.q, last.dq, last.ddq, STOP_ACCELERATION, STOP_JERK), t

@@ -219,6 +219,17 @@ class LogWriter:
         """Column names (empty until the schema is fixed)."""
         return self.schema.names if self.schema is not None else []
 
+    @property
+    def truth_decided(self) -> bool:
+        """Whether the ``true/...`` columns are fixed (by the constructor, :meth:`set_truth` or the first row)."""
+        return self.schema is not None or self._want_truth is not None
+
+    def set_truth(self, record: bool) -> None:
+        """Record the ``true/...`` columns (NaN in rows without truth) or not; HalError after the first row."""
+        if self.schema is not None:
+            raise HalError(f"{self.path}: set_truth after the first row: expected it before (the columns are fixed)")
+        self._want_truth = bool(record)
+
     def append(
         self,
         frame: SensorFrame,

@@ -127,3 +127,38 @@ def test_the_exit_waits_for_the_threads_the_command_started():
     finally:
         stuck_stop.set()
         old_stop.set()
+
+
+def test_ctl_switches_the_mode_and_starts_or_stops_a_task_over_zenoh(tmp_path, capsys):
+    """``ctl torque``, ``ctl start TASK`` (the task travels in the request) and ``ctl stop`` reach the controller's
+    channel with their arguments; ``start`` without a task, or another action with one, is bad input (exit 2)."""
+    port = free_port()
+    seen = []
+    with robot_server(tmp_path, port):
+        backend = ZenohBackend("fake", connect=[endpoint(port)], truth=False)
+        channel = OperatorChannel()
+        serve_operator(backend, channel)
+        channel.publish("running", None, {"time": 1.5, "mode": "position"})
+        stop = threading.Event()
+
+        def loop():
+            while not stop.wait(0.002):
+                p = channel.take()
+                if p is not None:
+                    seen.append((p.action, p.args))
+                    channel.answer(p, True, "stopping" if p.action == "stop" else "running")
+
+        t = threading.Thread(target=loop, daemon=True)
+        t.start()
+        try:
+            codes = [_ctl(port, *a) for a in (("status",), ("torque",), ("start", "swing"), ("stop",))]
+        finally:
+            stop.set()
+            t.join(5.0)
+            backend.close()
+    out = capsys.readouterr().out
+    assert codes == [0, 0, 0, 0]
+    assert json.loads(out.splitlines()[0])["detail"] == {"time": 1.5, "mode": "position"}
+    assert seen == [("torque", {}), ("start", {"task": "swing"}), ("stop", {})]
+    assert _ctl(port, "start") == 2 and "expected a task: servotau ctl start TASK" in capsys.readouterr().err
+    assert _ctl(port, "stop", "swing") == 2 and "only start takes a task" in capsys.readouterr().err

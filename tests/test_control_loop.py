@@ -158,3 +158,55 @@ def test_the_loop_times_its_estimate_and_control_tick(backend):
 
     ControlLoop(backend, settle=SETTLE_S, hooks=[Times()]).run(None, 0.005)
     assert all(e > 0 and c > 0 for e, c in times)
+
+
+class Script(LoopHook):
+    """An operator acting at given loop ticks through the channel (the hook sets the tick before the loop takes)."""
+
+    def __init__(self, script):
+        from servotau.control.operator import OperatorChannel, _Pending
+
+        outer = self
+
+        class Channel(OperatorChannel):
+            def take(self):
+                action = outer.script.pop(outer.k, None)
+                return _Pending(action) if action is not None else None
+
+            def answer(self, pending, ok, state, error=None):
+                super().answer(pending, ok, state, error)
+                outer.answers.append((outer.k, pending.action, pending.answer))
+
+        self.script, self.answers, self.k = dict(script), [], 0
+        self.channel = Channel()
+
+    def on_tick(self, tick):
+        self.k = tick.k
+
+
+def test_a_reference_that_ends_ends_the_run(backend):
+    """``reference(tick)`` returning None (a task's end) ends the run, ``completed``, without writing for that tick."""
+    loop = ControlLoop(backend, settle=SETTLE_S)
+    result = loop.run(lambda tick: loop.hold if tick.t < 0.01 - 1e-9 else None, None)
+    assert result.end == "completed" and result.ticks == loop.settle_ticks + 10 + 1 and backend.robot.seq == 110
+
+
+def test_while_tripped_a_mode_switch_is_refused_and_a_stop_ends_the_run(backend):
+    """After a trip (hold until the operator): ``torque`` is refused with the reason, ``stop`` ends the run at once,
+    ``stopped``, and the channel is closed."""
+    n = int(round(SETTLE_S / backend.info.period))
+    script = Script({n + 10: "torque", n + 20: "stop"})
+
+    def reference(tick):
+        q = loop.hold.q.copy()
+        if tick.t >= 0.005:
+            q[backend.info.joint_names.index("RLEG_JOINT3")] += 0.2
+        return TrajectoryPoint(q, loop.hold.dq, loop.hold.ddq)
+
+    loop = ControlLoop(backend, settle=SETTLE_S, hooks=[script])
+    result = loop.run(reference, None, operator=script.channel, hold_timeout=None)
+    (k1, a1, torque), (k2, a2, stop) = script.answers
+    assert (k1, a1, k2, a2) == (n + 10, "torque", n + 20, "stop")
+    assert not torque.ok and "cannot switch to torque mode: safety trip [command_error] RLEG_JOINT3" in torque.error
+    assert stop.ok and stop.state == "stopped" and result.end == "stopped" and result.ticks == n + 21
+    assert script.channel.closed

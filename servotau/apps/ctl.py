@@ -1,18 +1,25 @@
-"""``servotau ctl``: the operator's commands to a running controller (or robot) after a safety trip.
+"""``servotau ctl``: the operator's commands to a running controller (or robot).
 
-After a safety trip ``servotau control`` holds the last valid measured posture and keeps answering every
-frame until the operator acts::
+``servotau control`` serves these on its own Zenoh session, with the same authorisation as its robot link::
 
-    servotau ctl status                # the controller's state: running, tripped, holding, ...
-    servotau ctl reset                 # clear the trip: position control at the held posture
+    servotau ctl status                # the controller's state (running, tripped, holding, stopping, ...), its
+                                       # robot time, mode and phase
+    servotau ctl torque                # switch to torque mode (bumpless; refused while a trip is latched)
+    servotau ctl position              # switch to position mode
+    servotau ctl start TASK            # replace the running task: the reference comes to rest, then TASK
+                                       # (a name of config/tasks/, a file or module:attribute the controller can
+                                       # read; refused if it is infeasible from there)
+    servotau ctl stop                  # end the run smoothly: reference at rest, position mode, log closed (exit 0)
+    servotau ctl reset                 # after a safety trip: position control at the held posture
                                        # (refused, with the reason, while the trip's cause is still there)
-    servotau ctl release               # end the controller cleanly (its log closed; exit code 3 after a trip)
+    servotau ctl release               # end the controller at once (its log closed; exit code 3 after a trip)
     servotau ctl reset --robot-side    # reset the robot's own latched fault (servo off) instead
 
-Each sends a Zenoh query with the JSON payload ``{"action": ...}`` to ``servotau/v1/<robot>/controller/operator``
-(served by the controller process) or, with ``--robot-side``, to ``servotau/v1/<robot>/operator`` (served by
-the robot process), through the robot's endpoint (``[hal.zenoh] connect`` of the HAL config, or ``--connect``)
-as a Zenoh client, and prints the JSON answer ``{"ok", "state", "error"}``.
+Each sends a Zenoh query with the JSON payload ``{"action": ...}`` (``start``: also ``"task"``) to
+``servotau/v1/<robot>/controller/operator`` (served by the controller process) or, with ``--robot-side``, to
+``servotau/v1/<robot>/operator`` (served by the robot process), through the robot's endpoint (``[hal.zenoh]
+connect`` of the HAL config, or ``--connect``) as a Zenoh client, with ``[hal.zenoh]``'s TLS and identity, and
+prints the JSON answer ``{"ok", "state", "error", ...}``.
 
 Exit codes: 0 the action was done; 1 it was refused (the answer says why); 2 nobody answered or bad input.
 """
@@ -31,9 +38,11 @@ ANSWER_TIMEOUT = 5.0  # [s] wall time to wait for the answer (a reset is applied
 
 
 def register(sub) -> None:
-    p = sub.add_parser("ctl", help="operator commands to a running controller: reset, release, status",
+    p = sub.add_parser("ctl", help="operator commands to a running controller: status, position, torque, start, "
+                                   "stop, reset, release",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("action", choices=ACTIONS)
+    p.add_argument("task", nargs="?", help="start: the task (a name of config/tasks/, a file or module:attribute)")
     add_config_args(p, HAL)  # [hal.zenoh] robot and connect are the defaults
     p.add_argument("--robot", help="robot name in the keys (default: [hal.zenoh] robot)")
     p.add_argument("--connect", action="append", help="zenoh endpoint of the robot process or a router "
@@ -54,8 +63,9 @@ def operator_key(robot: str, robot_side: bool = False) -> str:
 
 
 def send(action: str, *, robot: str, connect: list[str], robot_side: bool = False,
-         timeout: float = ANSWER_TIMEOUT, security=None) -> dict:
-    """Send ``{"action": action}`` and return the JSON answer (``ok``, ``state``, ``error``); ``security``: the
+         timeout: float = ANSWER_TIMEOUT, security=None, task: str | None = None) -> dict:
+    """Send ``{"action": action}`` (with ``task`` for ``start``) and return the JSON answer (``ok``, ``state``,
+    ``error``); ``security``: the
     controller side's TLS and authentication (:class:`~servotau.hal.wire.security.Security`, [hal.zenoh]).
 
     Raises:
@@ -68,7 +78,8 @@ def send(action: str, *, robot: str, connect: list[str], robot_side: bool = Fals
     session = Session(zenoh_config(connect=connect, mode="client", security=security))  # a peer routes its
     # clients' queries
     try:
-        replies = list(session.z.get(key, payload=json.dumps({"action": action}).encode(), timeout=timeout))
+        body = {"action": action, **({"task": task} if task is not None else {})}
+        replies = list(session.z.get(key, payload=json.dumps(body).encode(), timeout=timeout))
     finally:
         session.close()
     for r in replies:
@@ -110,10 +121,15 @@ def main(args) -> int:
         print(f"servotau ctl: --robot-side {args.action}: expected reset (the robot process answers only reset; "
               "its state is on servotau/v1/<robot>/status)", file=sys.stderr)
         return 2
+    if (args.action == "start") != (args.task is not None):
+        print(f"servotau ctl {args.action}: " + ("expected a task: servotau ctl start TASK" if args.action == "start"
+                                                  else f"unexpected argument {args.task!r} (only start takes a task)"),
+              file=sys.stderr)
+        return 2
     try:
         robot, connect, security = _defaults(args)
         answer = send(args.action, robot=robot, connect=connect, robot_side=args.robot_side, timeout=args.timeout,
-                      security=security)
+                      security=security, task=args.task)
     except ServotauError as exc:  # nobody answered, or a bad [hal.zenoh] (names the field)
         print(f"servotau ctl: {exc}", file=sys.stderr)
         return 2

@@ -1,0 +1,247 @@
+"""From a task to what the loop runs: phases built on the start posture, checked against the robot's limits,
+and the controller configuration the task asks for (its gains, its force task).
+
+A task is any object with ``name`` and ``phases(info, q_start) -> Sequence[Phase]`` (:class:`Task`); a task
+file is one (:class:`FileTask`). :func:`check_feasible` refuses a phase that would leave the joint limits (with
+the safety margin), exceed the controller's velocity limit or last less than its trajectory needs, naming the
+phase, the joint and the limit; the runner calls it after the first read and before the first command.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from servotau.config import load_toml
+from servotau.errors import ConfigError, ControlError
+from servotau.hal.types import RobotInfo
+
+from ..config import DEFAULT_PATH, ControlConfig, SafetyLimits
+from .references import Hold, JerkLimited, JointReference, MinJerk, Sinusoids, Tabled, waypoint_targets
+from .spec import ForceSpec, TaskSpec, load_task
+from .table import load_table
+
+START_TOLERANCE = 0.01  # [rad] an absolute trajectory table must start this close to the posture at its phase
+SHORT_SPEED = 2.5  # [rad/s] peak speed of a min-jerk phase in a shortened task (FileTask.shortened)
+
+
+class InfeasibleTask(ControlError):
+    """A task the robot cannot follow (beyond a joint limit, too fast, too short): refused before anything moves."""
+
+
+@dataclass
+class Phase:
+    """One phase as the loop runs it: a joint reference in a control mode, for ``duration`` [s] (None: the
+    reference's own; endless if it has none), with an optional force task (a torque phase only)."""
+
+    name: str
+    reference: JointReference
+    mode: str = "position"
+    duration: float | None = None
+    force: ForceSpec | None = None
+    gains: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def length(self) -> float | None:
+        """[s] how long the phase runs (None: until stopped)."""
+        return self.duration if self.duration is not None else self.reference.duration
+
+
+def ref_waypoints(p, ref: MinJerk):
+    """The waypoints of ``p`` with the times ``ref`` was built with (scaled to the phase's duration)."""
+    times = ref.traj.times[1:]
+    return tuple(replace(w, at=float(t)) for w, t in zip(p.reference.waypoints, times, strict=True))
+
+
+class Task:
+    """What a task provides (user tasks implement :meth:`phases`; ``--task mypkg.mytask:Task``).
+
+    ``phases(info, q_start)`` builds the phases on the start posture (n,) [rad]. The runner also calls it once
+    with a zero posture before the first frame, to read the run's gains and force task (the controller is built
+    before the robot is read): the gains must not depend on the posture.
+    """
+
+    name: str = "task"
+    settle: float = 0.5  # [s] position mode at the start posture: filters fill, F/T offsets calibrated
+    ft_offsets: str = "calibrate"  # "calibrate" (end effectors free while settling) or "external" (the caller's)
+    source: str = "<code>"
+
+    def phases(self, info: RobotInfo, q_start: np.ndarray) -> Sequence[Phase]:
+        raise NotImplementedError
+
+
+class FileTask(Task):
+    """A task file (:mod:`.spec`), its phases built on the posture at the start."""
+
+    def __init__(self, spec: TaskSpec):
+        self.spec = spec
+        self.name, self.settle, self.ft_offsets, self.source = spec.name, spec.settle, spec.ft_offsets, spec.source
+
+    @classmethod
+    def load(cls, name: str | Path, duration: float | None = None) -> FileTask:
+        """``load_task(name)``; ``duration`` [s] replaces the duration of the task's ``duration_phase``."""
+        spec = load_task(name)
+        if duration is not None:
+            if spec.duration_phase is None:
+                raise ConfigError(f"{spec.source}: --duration {duration:g}: this task has no duration_phase to set")
+            if not duration > 0:
+                raise ConfigError(f"--duration {duration!r}: expected > 0 [s]")
+            spec = replace(spec, phases=tuple(replace(p, duration=duration) if p.name == spec.duration_phase else p
+                                              for p in spec.phases))
+        return cls(spec)
+
+    def shortened(self, seconds: float, settle: float | None = None) -> FileTask:
+        """The task with every phase cut to at most ``seconds`` (quick runs, tests) and the settle phase to
+        ``settle`` [s]: a jerk-limited phase keeps its time-optimal length, a min-jerk one the length at which its
+        peak speed is :data:`SHORT_SPEED`, a table its own."""
+        phases = tuple(replace(p, duration=min(p.duration, seconds))
+                       if p.duration is not None and p.reference.kind != "waypoints" else p for p in self.spec.phases)
+        out = FileTask(replace(self.spec, phases=phases, settle=self.spec.settle if settle is None else settle))
+        out._short = seconds
+        return out
+
+    def phases(self, info: RobotInfo, q_start: np.ndarray) -> list[Phase]:
+        out, q0 = [], np.array(q_start, dtype=float)
+        for p in self.spec.phases:
+            ref = self._reference(p, info, q0, q_start)
+            duration = p.duration
+            if isinstance(ref, MinJerk) and duration is not None:
+                ref = self._reference(replace(p, reference=replace(p.reference, waypoints=tuple(
+                    replace(w, at=w.at * duration / ref.duration) for w in p.reference.waypoints))), info, q0,
+                    q_start)
+                duration = None
+            short = getattr(self, "_short", None)
+            if isinstance(ref, MinJerk) and short is not None:
+                peak = float(ref.envelope(None)[2].max())
+                scale = min(1.0, max(short, ref.duration * peak / SHORT_SPEED) / ref.duration)
+                ref = self._reference(replace(p, reference=replace(p.reference, waypoints=tuple(
+                    replace(w, at=w.at * scale) for w in ref_waypoints(p, ref)))), info, q0, q_start)
+            if isinstance(ref, JerkLimited) and short is not None and duration is not None:
+                duration = max(duration, ref.optimal)
+            phase = Phase(p.name, ref, p.mode, duration, p.force, dict(p.gains))
+            out.append(phase)
+            if not (p.force is not None and p.force.posture == "compatible"):  # else: near q0 (max_displacement)
+                q0 = ref.sample(phase.length).q.copy() if phase.length is not None else ref.end
+        return out
+
+    def _reference(self, p, info: RobotInfo, q0: np.ndarray, q_task: np.ndarray) -> JointReference:
+        r, names = p.reference, info.joint_names
+        where = f'{self.source}: phase "{p.name}"'
+        for j in [*r.waves, *(k for w in r.waypoints for k in (*w.targets, *w.delta))]:
+            if j not in names:
+                raise ConfigError(f'{where}: joint "{j}" is not a joint of the robot: expected one of {list(names)}')
+        if r.kind in ("sinusoid", "growing_sinusoid"):
+            return Sinusoids(q0, names, r.waves)
+        if r.kind == "waypoints":
+            targets = waypoint_targets(r, q0, names, q_task)
+            if r.profile == "min_jerk":
+                return MinJerk(q0, names, [(w.at, dict(zip(names, q, strict=True)))
+                                           for w, q in zip(r.waypoints, targets, strict=True)])
+            return JerkLimited(q0, targets, r.max_velocity, r.max_acceleration, r.max_jerk,
+                               p.duration if p.duration is not None else 0.0)
+        if r.kind == "table":
+            try:
+                table = load_table(r.table, names, r.joints)
+            except ConfigError as exc:
+                raise ConfigError(f"{where}: {exc}") from None
+            return Tabled(q0, names, table, r.relative)
+        return Hold(q0)
+
+
+def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits: SafetyLimits) -> None:
+    """Refuse phases beyond the joint limits (``q_min + margin``, ``q_max - margin``), the velocity limit
+    (``limits.max_velocity``) or shorter than their trajectory.
+
+    Raises:
+        InfeasibleTask: Naming the task's file, the phase, the joint and the limit.
+    """
+    names, margin = info.joint_names, limits.joint_limit_margin
+    lo_lim, hi_lim = info.q_min + margin, info.q_max - margin
+    before: Phase | None = None
+    for p in phases:
+        where = f'{task.source}: phase "{p.name}"'
+        ref = p.reference
+        if before is not None and before.length is not None and not (
+                before.force is not None and before.force.posture == "compatible"):
+            jump = np.abs(ref.sample(0.0).q - before.reference.sample(before.length).q)
+            if jump.max() > START_TOLERANCE:
+                i = int(np.argmax(jump))
+                raise InfeasibleTask(f'{where} starts {jump[i]:.3f} rad away from where phase "{before.name}" ends on '
+                                     f"{names[i]}: expected within {START_TOLERANCE} rad (a reference without jumps)")
+        before = p
+        if isinstance(ref, JerkLimited) and p.duration is not None and p.duration < ref.optimal - 1e-9:
+            raise InfeasibleTask(f"{where}: duration {p.duration:g} s is shorter than its time-optimal trajectory "
+                                 f"({ref.optimal:.3f} s within max_velocity, max_acceleration, max_jerk): expected "
+                                 f">= {ref.optimal:.3f} s")
+        if isinstance(ref, Tabled) and p.duration is not None and p.duration < ref.duration - 1e-9:
+            raise InfeasibleTask(f"{where}: duration {p.duration:g} s is shorter than its table {ref.table.file} "
+                                 f"({ref.duration:g} s): expected >= {ref.duration:g} s, or no duration")
+        if isinstance(ref, Tabled):
+            jump = np.abs(ref.first - ref.q0[ref.index])
+            if jump.max() > START_TOLERANCE:
+                j = int(np.argmax(jump))
+                raise InfeasibleTask(f'{where}: the table {ref.table.file} starts {jump[j]:.3f} rad away from the '
+                                     f"posture at the phase start on {ref.table.joints[j]}: expected within "
+                                     f"{START_TOLERANCE} rad (move there first with a waypoints phase)")
+        lo, hi, v = ref.envelope(p.length)
+        for arr, lim, cmp, what in ((lo, lo_lim, np.less, "lower"), (hi, hi_lim, np.greater, "upper")):
+            bad = np.flatnonzero(cmp(arr, lim))
+            if bad.size:
+                i = int(bad[0])
+                raise InfeasibleTask(f"{where}: joint {names[i]} reaches {arr[i]:.3f} rad, beyond its {what} limit "
+                                     f"{lim[i]:.3f} rad (q_{'min' if what == 'lower' else 'max'} "
+                                     f"{'+' if what == 'lower' else '-'} joint_limit_margin {margin:g} rad)")
+        over = np.flatnonzero(v > limits.max_velocity)
+        if over.size:
+            i = int(over[np.argmax(v[over] / limits.max_velocity[over])])
+            need = ""
+            if isinstance(ref, MinJerk):
+                need = f": expected a duration of at least {ref.duration * v[i] / limits.max_velocity[i]:.2f} s"
+            raise InfeasibleTask(f"{where}: joint {names[i]} moves at {v[i]:.2f} rad/s, above the velocity limit "
+                                 f"{limits.max_velocity[i]:g} rad/s (control.toml [safety] max_velocity){need}")
+
+
+def task_gains(task: Task, phases: Sequence[Phase]) -> tuple[dict, ForceSpec | None]:
+    """The gains and the force task of the run: every torque phase that sets gains sets the same ones, every
+    force phase the same sensor, frame, axes and k_f (the controller's gains are fixed for a run).
+
+    Raises:
+        ConfigError: Two phases disagree (naming both).
+    """
+    gains, force, gp, fp = {}, None, None, None
+    for p in phases:
+        if p.gains:
+            if gp is not None and dict(p.gains) != gains:
+                raise ConfigError(f'{task.source}: phase "{p.name}": gains {dict(p.gains)} differ from phase "{gp}"\'s '
+                                  f"{gains}: expected the same gains in every torque phase (fixed for a run)")
+            gains, gp = dict(p.gains), gp or p.name
+        if p.force is not None:
+            key = (p.force.sensor, p.force.frame, p.force.offset, p.force.axes, p.force.k_f)
+            if fp is not None and key != fp[1]:
+                raise ConfigError(f'{task.source}: phase "{p.name}": force task {key} differs from phase "{fp[0]}"\'s: '
+                                  "expected one force task per run")
+            force, fp = p.force, fp or (p.name, key)
+    return gains, force
+
+
+def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: ForceSpec | None,
+                        path: str | Path = DEFAULT_PATH, *, file: str = "") -> ControlConfig:
+    """config/control.toml (or ``path``) with ``gains`` for every torque joint and the ``force`` task."""
+    root = load_toml(path)
+    data = copy.deepcopy(dict(root.data))
+    if gains:
+        defaults = data.setdefault("defaults", {})
+        pairs = {"k6": "k_s", "k_s": "k6", "k7": "k_d", "k_d": "k7"}
+        for key, value in gains.items():
+            for table in (defaults, *data.get("joints", {}).values()):
+                table.pop(key, None)
+                table.pop(pairs.get(key, ""), None)
+            defaults[key] = value
+    if force is not None:
+        data["force"] = {"sensor": force.sensor, "frame": force.frame, "offset": list(force.offset),
+                         "axes": list(force.axes), "k_f": list(force.k_f)}
+    return ControlConfig.from_mapping(data, info, file=f"{root.file} with the gains of {file or 'the task'}")

@@ -1,0 +1,256 @@
+"""Task files, trajectory tables, references and the feasibility check (control/tasks/), without running a loop."""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from servotau.control.tasks import FileTask, InfeasibleTask, TaskRunner, import_task, load_table, load_task
+from servotau.control.trajectory import JerkLimitedSegment, stopping_segment
+from servotau.errors import ConfigError
+
+SHIPPED = ("hold", "swing", "force", "identification", "table_example")
+
+
+@pytest.fixture(scope="module")
+def robot():
+    """(RobotInfo, half-sitting posture) of the simulated HRP-2."""
+    from servotau.simrobot.sim import SimConfig, SimRobot
+
+    sim = SimRobot(SimConfig.named("hanging", seed=0))
+    return sim.info, sim.read().q.copy()
+
+
+def write(tmp_path, text: str, name: str = "task.toml"):
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+SINE = """
+    name = "t"
+    [[phases]]
+    name = "wave"
+    duration = 1.0
+    [phases.reference]
+    type = "sinusoid"
+    [phases.reference.joints.RLEG_JOINT3]
+    amplitude = {amplitude}
+    frequency = {frequency}
+    """
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_every_shipped_task_reads_and_is_feasible_from_half_sitting(robot, name):
+    info, q = robot
+    phases = TaskRunner(FileTask.load(name), info).prepare(q)
+    assert phases and all(p.mode in ("position", "torque") for p in phases)
+
+
+def test_the_swing_task_is_the_paper_swing(robot):
+    """config/tasks/swing.toml reproduces control/trajectory.right_leg_swing sample by sample."""
+    from servotau.control.trajectory import right_leg_swing
+
+    info, q = robot
+    phase = TaskRunner(FileTask.load("swing", duration=2.5), info).prepare(q)[0]
+    swing = right_leg_swing(info.joint_names, q, 2.5)
+    for t in np.linspace(0, 2.5, 37):
+        a, b = phase.reference.sample(t), swing.sample(t)
+        assert np.allclose(a.q, b.q) and np.allclose(a.dq, b.dq) and np.allclose(a.ddq, b.ddq)
+
+
+def test_a_bad_field_names_the_file_the_phase_and_the_field(tmp_path):
+    with pytest.raises(ConfigError, match=r"task.toml: field 'phases.wave.reference.joints.RLEG_JOINT3.frequency' "
+                                          r"= -1.0: expected a finite number > 0 \[Hz\]"):
+        load_task(write(tmp_path, SINE.format(amplitude=0.1, frequency=-1.0)))
+    with pytest.raises(ConfigError, match=r"field 'phases.wave.mode' = 'force': expected one of"):
+        load_task(write(tmp_path, SINE.format(amplitude=0.1, frequency=1).replace('name = "wave"',
+                                                                                   'name = "wave"\nmode = "force"')))
+
+
+def test_gains_in_a_position_phase_and_two_gain_sets_are_refused(tmp_path, robot):
+    text = SINE.format(amplitude=0.1, frequency=1).replace('name = "wave"', 'name = "wave"\nk6 = 0.5')
+    with pytest.raises(ConfigError, match=r"field 'phases.wave.k6' = 0.5: expected no gains in a position phase"):
+        load_task(write(tmp_path, text))
+    text = """
+        [[phases]]
+        name = "a"
+        mode = "torque"
+        k6 = 0.5
+        duration = 0.1
+        [[phases]]
+        name = "b"
+        mode = "torque"
+        k6 = 0.25
+        duration = 0.1
+        """
+    with pytest.raises(ConfigError, match=r'phase "b": gains \{\'k6\': 0.25\} differ from phase "a"'):
+        TaskRunner(FileTask(load_task(write(tmp_path, text))), robot[0]).prepare(robot[1])
+
+
+def test_an_unknown_joint_is_refused_naming_it(tmp_path, robot):
+    task = FileTask(load_task(write(tmp_path, SINE.format(amplitude=0.1, frequency=1).replace("RLEG_JOINT3",
+                                                                                              "RLEG_JOINT9"))))
+    with pytest.raises(ConfigError, match=r'phase "wave": joint "RLEG_JOINT9" is not a joint of the robot'):
+        TaskRunner(task, robot[0]).prepare(robot[1])
+
+
+def test_beyond_a_joint_limit_is_refused_naming_phase_joint_and_limit(tmp_path, robot):
+    task = FileTask(load_task(write(tmp_path, SINE.format(amplitude=2.0, frequency=0.1))))
+    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 reaches -1.127 rad, beyond its lower '
+                                             r"limit -0.015 rad \(q_min \+ joint_limit_margin 0.02 rad\)"):
+        TaskRunner(task, robot[0]).prepare(robot[1])
+
+
+def test_too_fast_is_refused_naming_the_velocity_limit(tmp_path, robot):
+    task = FileTask(load_task(write(tmp_path, SINE.format(amplitude=0.5, frequency=3.0))))
+    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 9.42 rad/s, above the '
+                                             r"velocity limit 5 rad/s"):
+        TaskRunner(task, robot[0]).prepare(robot[1])
+
+
+def test_a_swing_too_short_is_refused_with_the_duration_it_needs(robot):
+    with pytest.raises(InfeasibleTask, match=r'swing.toml: phase "swing": joint RLEG_JOINT3 moves at 6.42 rad/s, '
+                                             r".*expected a duration of at least 1.54 s"):
+        TaskRunner(FileTask.load("swing", duration=1.2), robot[0]).prepare(robot[1])
+
+
+def test_a_jerk_limited_phase_shorter_than_its_trajectory_is_refused(tmp_path, robot):
+    text = """
+        [[phases]]
+        name = "reach"
+        duration = 0.2
+        [phases.reference]
+        type = "waypoints"
+        max_velocity = 1.0
+        [[phases.reference.waypoints]]
+        RLEG_JOINT3 = { delta = 0.5 }
+        """
+    task = FileTask(load_task(write(tmp_path, text)))
+    with pytest.raises(InfeasibleTask, match=r'phase "reach": duration 0.2 s is shorter than its time-optimal '
+                                             r"trajectory \(0.800 s within max_velocity, max_acceleration, "
+                                             r"max_jerk\): expected >= 0.800 s"):
+        TaskRunner(task, robot[0]).prepare(robot[1])
+
+
+def test_a_jerk_limited_move_keeps_its_bounds_and_arrives_together():
+    seg = JerkLimitedSegment([0.0, 0.0, 1.0], [1.0, -0.5, 1.0], 2.0, 10.0, 100.0)
+    ts = np.linspace(0, seg.duration, 400)
+    q, dq, ddq = (np.array(x) for x in zip(*(seg.sample(t) for t in ts), strict=True))
+    assert np.allclose(q[-1], [1.0, -0.5, 1.0]) and np.allclose(dq[-1], 0) and np.allclose(q[:, 2], 1.0)
+    assert np.abs(dq).max() <= 2.0 + 1e-9 and np.abs(ddq).max() <= 10.0 + 1e-9
+    assert 0.79 < seg.duration < 0.81  # 1 rad at 2 rad/s with 0.2 s ramps: the time-optimal 0.8 s
+    stop = stopping_segment([0.0], [1.0], [0.0], 5.0, 50.0)
+    assert np.allclose(stop.sample(stop.duration)[1], 0) and stop.q1[0] > 0
+
+
+TABLE = "t,RLEG_JOINT2,RLEG_JOINT3\n0,0,0\n0.5,-0.1,0.2\n1.0,0,0\n"
+
+
+def test_a_table_with_a_misspelled_column_names_it_and_the_closest_joint(tmp_path, robot):
+    path = tmp_path / "m.csv"
+    path.write_text(TABLE.replace("RLEG_JOINT3", "RLEG_JIONT3"))
+    with pytest.raises(ConfigError, match=r'm.csv: column "RLEG_JIONT3" is not a joint of the robot \(did you mean '
+                                          r'"RLEG_JOINT3"\?\)'):
+        load_table(path, robot[0].joint_names)
+
+
+def test_a_table_missing_a_column_of_the_task_names_it(tmp_path, robot):
+    (tmp_path / "m.csv").write_text(TABLE)
+    text = """
+        [[phases]]
+        name = "play"
+        [phases.reference]
+        type = "table"
+        file = "m.csv"
+        relative = true
+        joints = ["RLEG_JOINT2", "RLEG_JOINT3", "RLEG_JOINT4"]
+        """
+    task = FileTask(load_task(write(tmp_path, text)))
+    with pytest.raises(ConfigError, match=r'phase "play": .*m.csv: no column "RLEG_JOINT4": expected a column for each '
+                                          r"joint of the task"):
+        TaskRunner(task, robot[0]).prepare(robot[1])
+
+
+def test_a_phase_shorter_than_its_table_is_refused(tmp_path, robot):
+    (tmp_path / "m.csv").write_text(TABLE)
+    text = """
+        [[phases]]
+        name = "play"
+        duration = 0.5
+        [phases.reference]
+        type = "table"
+        file = "m.csv"
+        relative = true
+        """
+    with pytest.raises(InfeasibleTask, match=r'phase "play": duration 0.5 s is shorter than its table .*m.csv \(1 s\)'):
+        TaskRunner(FileTask(load_task(write(tmp_path, text))), robot[0]).prepare(robot[1])
+
+
+def test_a_table_reads_from_parquet_as_from_csv(tmp_path, robot):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    (tmp_path / "m.csv").write_text(TABLE)
+    pq.write_table(pa.table({"t": [0.0, 0.5, 1.0], "RLEG_JOINT2": [0.0, -0.1, 0.0], "RLEG_JOINT3": [0.0, 0.2, 0.0]}),
+                   tmp_path / "m.parquet")
+    a, b = (load_table(tmp_path / f, robot[0].joint_names) for f in ("m.csv", "m.parquet"))
+    assert a.joints == b.joints and np.allclose(a.q, b.q) and np.allclose(a.t, b.t)
+
+
+def test_an_absolute_table_far_from_the_start_is_refused(tmp_path, robot):
+    (tmp_path / "m.csv").write_text(TABLE)
+    text = """
+        [[phases]]
+        name = "play"
+        [phases.reference]
+        type = "table"
+        file = "m.csv"
+        """
+    with pytest.raises(InfeasibleTask, match=r'phase "play": the table .*m.csv starts 0.873 rad away from the posture '
+                                             r"at the phase start on RLEG_JOINT3"):
+        TaskRunner(FileTask(load_task(write(tmp_path, text))), robot[0]).prepare(robot[1])
+
+
+def test_a_user_task_by_import_path_and_the_errors_when_it_cannot_be(tmp_path, monkeypatch, robot):
+    (tmp_path / "mytasks.py").write_text(textwrap.dedent("""
+        from servotau.control.tasks import Hold, Phase, Task
+
+        class Still(Task):
+            name = "still"
+
+            def phases(self, info, q_start):
+                return [Phase("still", Hold(q_start), duration=0.1)]
+
+        class NoPhases:
+            name = "none"
+        """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        task = import_task("mytasks:Still")
+        assert task.name == "still" and TaskRunner(task, robot[0]).prepare(robot[1])[0].length == 0.1
+        with pytest.raises(ConfigError, match=r"--task mytasks:NoPhases: NoPhases lacks phases: expected a task"):
+            import_task("mytasks:NoPhases")
+        with pytest.raises(ConfigError, match=r"module mytasks has no attribute Missing"):
+            import_task("mytasks:Missing")
+        with pytest.raises(ConfigError, match=r"cannot import module nosuchpkg_xyz.tasks \(ModuleNotFoundError"):
+            import_task("nosuchpkg_xyz.tasks:Task")
+    finally:
+        sys.modules.pop("mytasks", None)
+
+
+def test_a_reference_jump_between_phases_is_refused(robot):
+    """A Python task whose second phase does not start where the first ends (a sinusoid cut mid-period)."""
+    from servotau.control.tasks import Hold, Phase, Sinusoids, Task, Wave
+
+    class Cut(Task):
+        def phases(self, info, q):
+            wave = Sinusoids(q, info.joint_names, {"RLEG_JOINT3": Wave(0.05, 1.0)})
+            return [Phase("wave", wave, duration=0.25), Phase("hold", Hold(q), duration=0.1)]
+
+    with pytest.raises(InfeasibleTask, match=r'phase "hold" starts 0.050 rad away from where phase "wave" ends on '
+                                             r"RLEG_JOINT3"):
+        TaskRunner(Cut(), robot[0]).prepare(robot[1])
