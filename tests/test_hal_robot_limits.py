@@ -115,6 +115,18 @@ def test_rate_limits_do_not_touch_a_normal_swing():
         assert b.status()["rate_limited_ticks"] == 0 and b.robot_state == "running"
 
 
+def test_a_command_within_the_limits_passes_unchanged_at_any_speed_under_the_velocity_limit():
+    """A 2.4 Hz, 0.3 rad sinusoid from rest (4.5 rad/s and 68 rad/s^2 at most, under 5 rad/s and 2000 rad/s^2) is
+    applied as commanded: each tick's target is on its way, not a point to stop at."""
+    lim = RateLimiter(np.array([5.0]), np.array([2000.0]), DT)
+    lim.reset(np.zeros(1))
+    for k in range(1, 1000):
+        target = np.array([0.3 * (1.0 - np.cos(2 * np.pi * 2.4 * k * DT))])
+        q = lim.bound(target)
+        assert q[0] == target[0], k
+        lim.applied(q)
+
+
 @pytest.mark.parametrize(("data", "match"), [
     ({"max_velocity": -1.0}, r"field 'safety.max_velocity' = -1.0: expected a finite number > 0 \[rad/s\]"),
     ({"max_acceleration": 0}, r"field 'safety.max_acceleration' = 0: expected a finite number > 0"),
