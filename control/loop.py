@@ -271,7 +271,8 @@ class ControlLoop:
                 for h in hooks:
                     h.before_control(tick)
                 t0 = clock()
-                tick.terms = terms = manager.tick(frame, estimate, tick.reference)  # used only if valid
+                off = getattr(backend, "robot_state", None) == "servo_off"  # a robot-side trip
+                tick.terms = terms = manager.tick(frame, estimate, tick.reference, off)  # estimate used only if valid
                 tick.control_ns = clock() - t0
                 backend.write(dict(zip(names, terms.q_des, strict=True)))
                 if truth_wanted:

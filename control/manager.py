@@ -194,7 +194,7 @@ class ControlManager:
         self.law.inverse_dynamics.set_force_reference(f_d)
 
     # -- per tick ----------------------------------------------------------------------------------
-    def tick(self, frame: SensorFrame, estimate, reference) -> ControlTerms:
+    def tick(self, frame: SensorFrame, estimate, reference, robot_servo_off: bool = False) -> ControlTerms:
         """One control period.
 
         Args:
@@ -203,6 +203,8 @@ class ControlManager:
                 with contacts, base fields with a floating base); None or ``valid == False`` while the
                 estimator fills its windows (position mode only).
             reference: Desired ``q, dq, ddq`` (n,) [rad, rad/s, rad/s^2], e.g. a ``TrajectoryPoint``.
+            robot_servo_off: The robot reports its servos cut (a robot-side trip, the backend's ``robot_state``):
+                the ``robot_servo_off`` trip, whose condition holds while it lasts.
 
         Returns:
             The outputs of this tick (the same object every tick); send ``q_des`` to the robot.
@@ -211,10 +213,14 @@ class ControlManager:
         t.time, t.seq = frame.time, frame.seq
         self._difference(frame)
         has_estimate = estimate is not None and getattr(estimate, "valid", True)
+        off = SafetyReport("robot_servo_off", "robot", 1.0, 0.0, float(frame.time), int(frame.seq)) \
+            if robot_servo_off else None
         if self._report is not None:
             t = self._hold(frame)
-            self._condition = self._check_hold(frame, estimate if has_estimate else None, t.dq_err)
+            self._condition = off or self._check_hold(frame, estimate if has_estimate else None, t.dq_err)
             return t
+        if off is not None:
+            return self._trip(frame, off)
         report = self.safety.check_frame(frame)
         if report is None and has_estimate:
             report = self.safety.check_estimate(frame, estimate.q, estimate.dq, estimate.ddq, estimate.tau)

@@ -38,6 +38,7 @@ CHECKS: tuple[str, ...] = (
     "joint_velocity",
     "joint_torque",
     "command_error",
+    "robot_servo_off",
 )
 
 _UNITS = {"joint_limit": "rad", "joint_velocity": "rad/s", "joint_torque": "N m", "command_error": "rad",
@@ -68,6 +69,8 @@ class SafetyReport:
             "estimate_gap": f"frames were skipped for longer than max_gap: the estimate is invalid for "
                             f"{self.value:g} more ticks",
             "joint_limit": f"q = {self.value:.4f}{unit} beyond the limit with margin {self.limit:.4f}{unit}",
+            "robot_servo_off": "the robot cut its servos (a robot-side trip: `servotau ctl reset --robot-side` once "
+                               "its cause is gone)",
         }.get(self.check, f"|value| = {abs(self.value):.4g}{unit} > limit {self.limit:.4g}{unit}")
         return f"safety trip [{self.check}]{where}: {what} at t = {self.time:.3f} s (seq {self.seq})"
 

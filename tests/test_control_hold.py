@@ -24,8 +24,10 @@ class Faulty:
     """An in-process backend whose frames get NaN knee encoders in [nan_from, nan_until) (robot ticks from the
     first frame) and that skips ``skip[tick]`` frames after the frame of robot tick ``tick`` (a late controller)."""
 
-    def __init__(self, nan_from=None, nan_until=None, skip=None):
+    def __init__(self, nan_from=None, nan_until=None, skip=None, servo_off=()):
         self.inner = InProcessBackend(SimRobot(SimConfig.named("hanging")))
+        self.servo_off = range(0) if not servo_off else range(*servo_off)
+        self._last_seq = None
         self.info = self.inner.info
         self.nan = (nan_from, nan_until)
         self.skip = dict(skip or {})
@@ -39,6 +41,7 @@ class Faulty:
         for _ in range(self.skip.pop(f.seq - self.seq0 - 1, 0)):  # the frames after the last one answered
             f = self.inner.read()
         self.reads += 1
+        self._last_seq = f.seq
         i = f.seq - self.seq0
         if self.nan[0] is not None and self.nan[0] <= i < self.nan[1]:
             q = f.q.copy()
@@ -49,6 +52,12 @@ class Faulty:
     def write(self, q_des):
         self.writes += 1
         self.inner.write(q_des)
+
+    @property
+    def robot_state(self):
+        """``servo_off`` for the robot ticks in ``servo_off`` (a robot-side trip), else the robot's own."""
+        i = self._last_seq - self.seq0 if self.seq0 is not None else -1
+        return "servo_off" if i in self.servo_off else self.inner.robot_state
 
     def ground_truth(self):
         return self.inner.ground_truth()
@@ -195,6 +204,20 @@ def test_skipped_frames_in_torque_mode_are_counted_gaps_not_a_trip():
     mgr = ControlManager(backend.info, dataclasses.replace(mgr.config, gap_fallback="trip"))
     _, rec, result = _run(backend, None, hold_timeout=0.0, duration=0.2, manager=mgr)
     assert rec.trips == [(181, "estimate_gap", "")] and "invalid for 80 more ticks" in result.tripped
+
+
+def test_a_robot_side_trip_latches_the_controllers_hold_until_the_robot_is_back():
+    """The robot reports its servos cut from tick 150 to 300 (a robot-side trip): the controller latches the
+    robot_servo_off hold at once; a reset while the robot is off is refused, naming the robot-side reset; once the
+    robot is back, the reset is accepted."""
+    backend = Faulty(servo_off=(150, 300))
+    op = ScriptedOperator({200: "reset", 350: "reset", 400: "release"})
+    _, rec, result = _run(backend, op, hold_timeout=None, duration=0.2)
+    assert rec.trips == [(150, "robot_servo_off", "robot")]
+    answers = {(t, a): ans for t, a, ans in op.answers}
+    refused = answers[(200, "reset")]
+    assert not refused.ok and "ctl reset --robot-side" in refused.error, refused
+    assert answers[(350, "reset")].ok and result.end == "released" and result.resets == 1
 
 
 def test_operator_channel_across_threads():

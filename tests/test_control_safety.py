@@ -39,6 +39,8 @@ def _ref(offset=0.0):
 def _fault(check):
     """(frame, estimate, reference) of the faulty tick k = 10 for ``check``, and the expected joint or sensor."""
     k, q = 10, Q0.copy()
+    if check == "robot_servo_off":  # the backend's robot_state, passed to the tick
+        return _frame(k), _estimate(), _ref(), "robot"
     if check == "sensor_status":
         status = np.zeros(6, np.uint8)
         status[2] = STATUS_SATURATED
@@ -101,7 +103,7 @@ def test_each_check_trips_and_latches_a_hold(check):
         frame, est, ref, where = _frame(10), _estimate(), _ref(), None
     else:
         frame, est, ref, where = _fault(check)
-    out = mgr.tick(frame, est, ref)
+    out = mgr.tick(frame, est, ref, check == "robot_servo_off")
     if check is None:
         assert not mgr.tripped and out.mode == "torque"
         return
