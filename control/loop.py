@@ -19,9 +19,10 @@ Phases:
 - end: ``reference(tick)`` returning None ends the run (``completed``: a task's last phase is over);
   ``duration`` None runs until then, or until stopped.
 - stop (``request_stop()``, Ctrl-C, the operator's ``stop``): the reference comes to rest within
-  :data:`STOP_ACCELERATION` and :data:`STOP_JERK` from its last state (jerk-limited), the manager switches to
+  :data:`~.trajectory.STOP_ACCELERATION` and ``STOP_JERK`` from its last state (jerk-limited), the manager switches to
   position mode (bumpless: the switch offset fades over ``fade_time``), and once both are done the run ends
-  (``stopped``). A stop while a trip is latched ends the run at once (the hold was written).
+  (``stopped``); the stopping reference stays within the joint range less ``joint_limit_margin``. A stop while
+  a trip is latched ends the run at once (the hold was written).
 - hold (after a trip): the manager holds the last valid measured posture (torque terms zero, integrals
   frozen) and the loop keeps answering every frame, reporting the trip once (:meth:`LoopHook.tripped`),
   until an operator acts through an :class:`~servotau.control.operator.OperatorChannel`: ``reset`` (refused
@@ -63,7 +64,6 @@ from .trajectory import TrajectoryPoint, stopping_segment
 log = logging.getLogger(__name__)
 
 SETTLE = 0.5  # [s] in position mode before the run's mode: filters fill, F/T offsets are calibrated
-STOP_ACCELERATION, STOP_JERK = 5.0, 50.0  # [rad/s^2, rad/s^3] bounds of the reference's stop (request_stop)
 DETAIL_TICKS = 100  # the operator's status detail (robot time, mode, phase) is refreshed every this many ticks
 ESTIMATOR_VARIANT = "low_delay"  # the estimator variant the torque controller is stable with in simulation
 
@@ -170,6 +170,8 @@ class ControlLoop:
         self._frame: SensorFrame | None = None
         self.hold: TrajectoryPoint | None = None  # the start posture, at rest (set by start())
         self._stop_requested = False
+        margin = self.manager.config.safety.joint_limit_margin
+        self._q_range = (info.q_min + margin, info.q_max - margin)  # [rad] where a stopping reference may go
         self.state = "starting"  # the operator states (control/operator.py STATES)
         self.describe: Callable[[], dict] = dict  # more of the status detail, e.g. a task runner's phase
 
@@ -259,7 +261,9 @@ class ControlLoop:
                 if held is not None:
                     tick.reference = held
                 elif stopping is not None:
-                    tick.reference = TrajectoryPoint(*stopping[0].sample(float(frame.time) - stopping[1]))
+                    q, dq, ddq = stopping[0].sample(float(frame.time) - stopping[1])
+                    np.clip(q, *self._q_range, out=q)  # braking never carries the reference out of the joint range
+                    tick.reference = TrajectoryPoint(q, dq, ddq)
                 elif i < n_settle or reference is None:
                     tick.reference = self.hold
                 else:
@@ -360,4 +364,4 @@ class ControlLoop:
         log.info("stopping at t = %.3f s: the reference comes to rest, position mode", t)
         if not self.manager.tripped:
             self.manager.request_mode(Mode.POSITION)
-        return stopping_segment(last.q, last.dq, last.ddq, STOP_ACCELERATION, STOP_JERK), t
+        return stopping_segment(last.q, last.dq, last.ddq), t

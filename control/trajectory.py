@@ -274,7 +274,12 @@ class JerkLimitedSegment:
         return q, dq, ddq
 
 
-def stopping_segment(q, dq, ddq, a_max, j_max) -> JerkLimitedSegment:
+# Bounds of a reference's stop (the loop's request_stop, the runner's stop before a new task): from 2 rad/s the
+# reference comes to rest within about 0.1 s and 0.06 rad.
+STOP_ACCELERATION, STOP_JERK = 40.0, 800.0  # [rad/s^2, rad/s^3]
+
+
+def stopping_segment(q, dq, ddq, a_max=STOP_ACCELERATION, j_max=STOP_JERK) -> JerkLimitedSegment:
     """The fastest motion from the state ``q, dq, ddq`` (n,) to rest within ``a_max`` [rad/s^2] and ``j_max``
     [rad/s^3] (velocity control: the position ends where braking leaves it)."""
     seg = JerkLimitedSegment.__new__(JerkLimitedSegment)

@@ -38,7 +38,9 @@ _LOST = "  4    robot lost: the controller lost the connection to the robot"
 _INTERRUPTED = "  130  interrupted (Ctrl-C)"
 EXIT_CODES = "\n".join(["exit codes:", _SUCCESS, _ERROR, _TRIP, _LOST, _INTERRUPTED])
 COMMAND_EXIT_CODES = {
-    "control": EXIT_CODES,
+    "control": "\n".join(["exit codes:", "  0    success: the task ended, or a first Ctrl-C / SIGTERM / `ctl stop` "
+                           "brought it to rest", _ERROR, _TRIP, _LOST,
+                           "  130  released before the end of the task (a second Ctrl-C or SIGTERM)"]),
     "demo": EXIT_CODES + "\n  (demo: the controller's exit code)",
     "ctl": "\n".join(["exit codes:", "  0    the action was done",
                       "  1    the action was refused (the answer says why)", "  2    nobody answered, or bad input",

@@ -254,3 +254,27 @@ def test_a_reference_jump_between_phases_is_refused(robot):
     with pytest.raises(InfeasibleTask, match=r'phase "hold" starts 0.050 rad away from where phase "wave" ends on '
                                              r"RLEG_JOINT3"):
         TaskRunner(Cut(), robot[0]).prepare(robot[1])
+
+
+def test_a_config_folders_control_file_finds_its_own_motor_file_and_task_names_skip_the_working_folder(
+        robot, tmp_path, monkeypatch):
+    """The task's controller config reads the motor file next to its control.toml (a --config folder), and a bare
+    task name never reads ./tasks/NAME.toml of the working folder."""
+    import shutil
+
+    from servotau.config import CONFIG_DIR
+    from servotau.control.tasks.build import task_control_config
+    from servotau.control.tasks.spec import task_path
+
+    info, _ = robot
+    (tmp_path / "motors").mkdir()
+    shutil.copy(CONFIG_DIR / "motors" / "hrp2_sim_deadband.toml", tmp_path / "motors" / "only_here.toml")
+    text = (CONFIG_DIR / "control.toml").read_text()
+    (tmp_path / "control.toml").write_text(text.replace("motors/hrp2_sim_deadband.toml", "motors/only_here.toml"))
+    config = task_control_config(info, {}, None, tmp_path / "control.toml")
+    assert config.motors  # read from tmp_path/motors/only_here.toml (not among the packaged defaults)
+    work = tmp_path / "work"
+    (work / "tasks").mkdir(parents=True)
+    (work / "tasks" / "swing.toml").write_text("not toml [")
+    monkeypatch.chdir(work)
+    assert task_path("swing") == CONFIG_DIR / "tasks" / "swing.toml"

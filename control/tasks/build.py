@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from servotau.config import load_toml
+from servotau.config import load_toml, resolve_config_path
 from servotau.errors import ConfigError, ControlError
 from servotau.hal.types import RobotInfo
 
@@ -233,6 +233,11 @@ def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: Forc
     """config/control.toml (or ``path``) with ``gains`` for every torque joint and the ``force`` task."""
     root = load_toml(path)
     data = copy.deepcopy(dict(root.data))
+    if isinstance(data.get("motors"), str):  # next to the file read (from_mapping knows no file to look beside)
+        try:
+            data["motors"] = str(resolve_config_path(data["motors"], root.file))
+        except ConfigError:
+            pass  # from_mapping names the field and the places looked
     if gains:
         defaults = data.setdefault("defaults", {})
         pairs = {"k6": "k_s", "k_s": "k6", "k7": "k_d", "k_d": "k7"}
@@ -244,4 +249,5 @@ def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: Forc
     if force is not None:
         data["force"] = {"sensor": force.sensor, "frame": force.frame, "offset": list(force.offset),
                          "axes": list(force.axes), "k_f": list(force.k_f)}
-    return ControlConfig.from_mapping(data, info, file=f"{root.file} with the gains of {file or 'the task'}")
+    label = f"{root.file} with the gains of {file or 'the task'}" if gains or force is not None else root.file
+    return ControlConfig.from_mapping(data, info, file=label)

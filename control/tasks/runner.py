@@ -38,7 +38,6 @@ from .spec import Wave
 
 log = logging.getLogger(__name__)
 
-STOP_ACCELERATION, STOP_JERK = 5.0, 50.0  # [rad/s^2, rad/s^3] bounds of the reference's stop before a new task
 
 
 class TaskRunner(LoopHook):
@@ -209,7 +208,12 @@ class TaskRunner(LoopHook):
         if self.manager().tripped:
             return "start: a safety trip is latched: reset first"
         last = self._last or TrajectoryPoint(tick.frame.q.copy(), np.zeros(self.info.nq), np.zeros(self.info.nq))
-        stop = stopping_segment(last.q, last.dq, last.ddq, STOP_ACCELERATION, STOP_JERK)
+        stop = stopping_segment(last.q, last.dq, last.ddq)
+        margin = self.manager().config.safety.joint_limit_margin
+        out = np.flatnonzero((stop.q1 < self.info.q_min + margin) | (stop.q1 > self.info.q_max - margin))
+        if out.size:
+            return (f"start {name}: the stop before it would carry {self.info.joint_names[out[0]]} to "
+                    f"{stop.q1[out[0]]:.3f} rad, beyond its range with the {margin} rad margin")
         try:
             task = self.resolve(name)
             old, self.task = self.task, task

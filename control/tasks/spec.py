@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from servotau.config import Section, load_toml, resolve_config_path
+from servotau.config import CONFIG_DIR, Section, load_toml, resolve_config_path
 from servotau.errors import ConfigError
 
 from ..config import AXES
@@ -103,11 +103,20 @@ class TaskSpec:
     source: str = "<code>"
 
 
-def task_path(name: str | Path) -> Path:
-    """A task file: a path, or a name of config/tasks (``swing`` -> config/tasks/swing.toml)."""
+def is_task_name(name: str | Path) -> bool:
+    """``name`` names a task of a config folder (``swing``), not a file (``my/task.toml``) nor a Python task
+    (``mypkg.mytask:Task``)."""
     p = Path(name)
-    if p.suffix != ".toml" and len(p.parts) == 1:  # a bare name: config/tasks/NAME.toml
-        p = Path("tasks") / f"{name}.toml"
+    return p.suffix != ".toml" and len(p.parts) == 1 and ":" not in str(name)
+
+
+def task_path(name: str | Path) -> Path:
+    """A task file: a path (as given), or a name of the packaged config/tasks (``swing`` ->
+    config/tasks/swing.toml; never a file of the working folder: a config folder's tasks come by path,
+    e.g. ``ConfigFiles.path("tasks/swing.toml")``)."""
+    p = Path(name)
+    if is_task_name(name):
+        p = CONFIG_DIR / "tasks" / f"{name}.toml"
     try:
         return resolve_config_path(p)
     except ConfigError:

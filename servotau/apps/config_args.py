@@ -94,16 +94,12 @@ def hal_config(files: ConfigFiles) -> Section:
     return s
 
 
-def controller_parts(files: ConfigFiles, info) -> dict:
-    """The controller (``control.toml``) and torque estimator (``estimation.toml``, the loop's variant) for the
-    robot ``info``, as ``manager`` and ``estimator`` keyword arguments of the control loop."""
+def torque_estimator(files: ConfigFiles, info):
+    """The torque estimator of the control loop (``estimation.toml``, the loop's variant) for the robot ``info``."""
     from servotau.control.loop import ESTIMATOR_VARIANT
-    from servotau.control.manager import ControlManager
     from servotau.estimation import EstimatorConfig, TorqueEstimator
 
-    estimation = EstimatorConfig.from_toml(files.path(ESTIMATION.name), variant=ESTIMATOR_VARIANT)
-    return {"manager": ControlManager.from_toml(info, files.path(CONTROL.name)),
-            "estimator": TorqueEstimator(info, estimation)}
+    return TorqueEstimator(info, EstimatorConfig.from_toml(files.path(ESTIMATION.name), variant=ESTIMATOR_VARIANT))
 
 
 def hanging_sim(files: ConfigFiles):

@@ -44,14 +44,15 @@ from servotau.apps.config_args import (
     HAL,
     add_config_args,
     config_files,
-    controller_parts,
     hal_config,
+    torque_estimator,
 )
 from servotau.apps.viewer import RerunHook, RerunStream, open_recording
 from servotau.control.config import DEFAULT_PATH as DEFAULT_CONTROL
 from servotau.control.loop import ControlLoop, LoopHook, Tick
 from servotau.control.operator import OperatorChannel
 from servotau.control.tasks import InfeasibleTask, StatusLine, Task, TaskRunner, resolve_task
+from servotau.control.tasks.spec import is_task_name
 from servotau.errors import ConfigError, ControlError, HalError
 
 log = logging.getLogger(__name__)
@@ -268,13 +269,20 @@ def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = 
     if status:
         loop.hooks = (*loop.hooks, StatusLine(loop, progress, runner))
     if save_ft_offsets:
+        try:
+            open(save_ft_offsets, "a", encoding="utf-8").close()  # a bad path fails here, before the first command
+        except OSError as exc:
+            raise ConfigError(f"--save-ft-offsets {save_ft_offsets}: cannot write it ({exc.strerror})") from None
         loop.hooks = (*loop.hooks, SaveOffsets(save_ft_offsets, loop.estimator, info.ft_sensor_names))
     runner.prepare(loop.start().q)  # InfeasibleTask before the first command
     runner.attach(loop)
     if loop_ready is not None:
         loop_ready(loop)
     jump = np.zeros(info.nq)
-    jump[info.joint_names.index(TRIP_JOINT)] = TRIP_JUMP
+    if trip_at is not None:
+        if TRIP_JOINT not in info.joint_names:
+            raise ConfigError(f"--trip-at: the fault injection moves {TRIP_JOINT}, which {info.name} does not have")
+        jump[info.joint_names.index(TRIP_JOINT)] = TRIP_JUMP
 
     def reference(tick: Tick):
         point = runner.reference(tick)
@@ -361,19 +369,29 @@ class _Signals:
             self.operator.post("release")
 
 
+def _task_file(files, name: str) -> str:
+    """The file of task ``name``: ``tasks/NAME.toml`` of the config folder, else of the packaged defaults."""
+    try:
+        return str(files.path(f"tasks/{name}.toml"))
+    except ConfigError as exc:
+        raise ConfigError(f"task {name}: no such task file (a name of tasks/ in the config folder or the packaged "
+                          f"defaults, a task file, or module:attribute): {exc}") from None
+
+
 def main(args) -> int:
     from servotau.hal.log import LogWriter
     from servotau.hal.registry import open_backend, overrides_from_args
 
     if args.hold_timeout is not None and not args.hold_timeout >= 0:
         raise ControlError(f"--hold-timeout {args.hold_timeout}: expected >= 0 [s]")
-    try:
-        task = resolve_task(args.task, args.duration)
+    files = config_files(args, HAL, CONTROL, ESTIMATION)
+    try:  # a task name comes from the --config folder, else the packaged tasks
+        name = _task_file(files, args.task) if is_task_name(args.task) else args.task
+        task = resolve_task(name, args.duration)
     except ConfigError as exc:
         print(f"servotau control: {exc}", file=sys.stderr)
         return 2
     threads_before = {t.ident for t in threading.enumerate()}
-    files = config_files(args, HAL, CONTROL, ESTIMATION)
     backend = open_backend(hal_config(files), **overrides_from_args(args))
     operator = OperatorChannel()
     writer = stream = None
@@ -393,12 +411,11 @@ def main(args) -> int:
                              robot_hz=args.rerun_robot_hz) if rec is not None else None
         writer = LogWriter(args.log, backend.info, metadata={"mode": args.mode or "task", "task": task.source},
                            realtime=_on_wall_clock(backend)) if args.log else None
-        parts = controller_parts(files, backend.info)
         result = run_session(backend, task=task, mode=args.mode, stream=stream, writer=writer,
                              operator=operator, hold_timeout=args.hold_timeout, hint=hint, trip_at=args.trip_at,
                              ft_offsets=offsets, status=not args.quiet, save_ft_offsets=args.save_ft_offsets,
                              loop_ready=lambda loop: setattr(signals, "loop", loop),
-                             control_path=files.path(CONTROL.name), estimator=parts["estimator"])
+                             control_path=files.path(CONTROL.name), estimator=torque_estimator(files, backend.info))
     except HalError as exc:
         print(f"servotau control: robot lost: {exc}", file=sys.stderr)
         return 4

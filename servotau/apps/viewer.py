@@ -7,12 +7,14 @@ Targets (``--rerun``): ``save:FILE`` (a .rrd file), ``connect:ADDR`` (a viewer t
 
 What is recorded, under which entity and with which unit: servotau/apps/viewer_layout.py (signal sets
 ``minimal``, ``control``, ``all``); the robot: servotau/apps/viewer_robot.py. Scalars are buffered and sent in
-columns, one entity per signal with one instance per joint, from a background thread, so that the control loop
-never waits for Rerun. The 3D robot is one Transform3D per body per logged tick at ``robot_hz``.
+columns, one entity per signal with one instance per joint, from a background thread: the control loop waits for
+Rerun only when 8 batches are queued (Rerun slower than the loop), and a batch Rerun refuses is dropped and counted.
+The 3D robot is one Transform3D per body per logged tick at ``robot_hz``.
 """
 
 from __future__ import annotations
 
+import logging
 import queue
 import shutil
 import subprocess
@@ -124,6 +126,7 @@ class RerunStream:
         self._ticks = self.rows = 0
         self._t0 = self._t1 = np.nan
         self._caller_cpu = self._sender_cpu = 0.0
+        self.dropped = 0  # batches Rerun refused (dropped by the sender thread)
         self._mode: str | None = None
         if rec is None:
             return
@@ -218,9 +221,17 @@ class RerunStream:
             self._robot = ([], [], [])
 
     def _send_loop(self) -> None:
+        """Send the queued batches until None; a batch Rerun refuses is dropped and counted (the first one
+        logged): the queue keeps draining, so the control loop never waits on a dead sender."""
         while (item := self._queue.get()) is not None:
             c0 = time.thread_time()
-            self._send(item)
+            try:
+                self._send(item)
+            except Exception as exc:  # anything Rerun raises: the recording must not stop the loop
+                self.dropped += 1
+                if self.dropped == 1:
+                    logging.getLogger(__name__).error("rerun: a %s batch could not be sent (%s); dropping it and "
+                                                      "counting further ones", item[0], exc)
             self._sender_cpu += time.thread_time() - c0
 
     def _send(self, item) -> None:
