@@ -148,11 +148,12 @@ def _dead_band_choice(ds, motor: MotorModel) -> tuple[float | None, bool, float,
 
 
 def build_motor_file(log: str | Path, joints: Sequence[str] | None = None, *, candidates: Sequence[str] = CANDIDATES,
-                     max_steps: int = MAX_STEPS, w: float = W, decimate: int = DECIMATE,
+                     max_steps: int = MAX_STEPS, w: float = W, decimate: int = DECIMATE, plan: str | Path | None = None,
                      progress: Callable[[str], None] | None = None) -> MotorFileReport:
     """The controller's motor model of every joint of ``log`` (module doc); the workbench reads every
     ``decimate``-th sample (the candidates are static effects; its diagnosis costs in proportion to the samples), the
-    dead band every sample.
+    dead band every sample. ``plan``: the collection plan whose ``[fit]`` settings align the log (default
+    config/identification.toml).
 
     Raises:
         IdentificationError: A joint whose model is not usable by the controller (k_tau <= 0, k_v < 0), naming
@@ -166,7 +167,7 @@ def build_motor_file(log: str | Path, joints: Sequence[str] | None = None, *, ca
 
     say = progress or (lambda _m: None)
     loss = Loss.asymmetric(w)
-    _, settings = load_plan()
+    _, settings = load_plan(plan) if plan is not None else load_plan()
     aligned = load_aligned(log, list(joints) if joints else None, settings, progress=say)
     # The workbench reads the log with the off-line estimates of every joint, estimated once here (as
     # `servotau model` does per joint when the log has none).

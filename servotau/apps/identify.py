@@ -240,7 +240,7 @@ def run_main(args) -> int:
         sim_config = sim_config_with_servo(args.servo, args.sim_config, out.with_suffix(".sim.toml"))
         args.backend = "inprocess"
     collect(args.hal, args.backend, args.port, args.plan, args.joints, sim_config, False, log, progress=say)
-    report = build_motor_file(log, None, candidates=effects, max_steps=args.max_steps, progress=say)
+    report = build_motor_file(log, None, candidates=effects, max_steps=args.max_steps, plan=args.plan, progress=say)
     path = write_motor_file(report, out)
     if args.json:
         print(json.dumps({**report.to_dict(), "motor_file": str(path)}))

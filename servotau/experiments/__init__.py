@@ -86,6 +86,9 @@ def check_files(servo: str | None, motors: str | None) -> None:
 
         check_servo_file(resolve_config_path(servo), JOINT_NAMES)
     if motors is not None:
-        from servotau.control.tuning import check_motor_file
+        from servotau.simrobot.sim import SimRobot
 
-        check_motor_file(motors)
+        from .common import control_config, sim_config
+
+        robot = SimRobot(sim_config("hanging", 0, servo))
+        control_config(robot.info, None, (), motors=motors)  # the torque joints' models and their predicted loops

@@ -78,6 +78,7 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
     those axes."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
+    from servotau.control.tuning import check_predicted_stable
 
     data = copy.deepcopy(load_toml(CONFIG_DIR / "control.toml").data)
 
@@ -104,7 +105,9 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
     if force_axes:
         data["force"] = {"sensor": "right_ankle", "frame": "ft_right_ankle", "offset": [0.0, 0.0, -0.02],
                          "axes": list(force_axes), "k_f": [FORCE_KF] * len(force_axes)}
-    return ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
+    config = ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
+    check_predicted_stable(config, info, str(data["motors"]))  # before anything moves
+    return config
 
 
 def motors_file() -> str:
