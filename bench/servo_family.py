@@ -15,6 +15,8 @@ trips. Parts: ``tuning`` (seeds 0 .. n_tuning - 1, the draws the controller's tu
 stderr. In the slow set (tests/test_bench_servo_family.py).
 
     python bench/servo_family.py --json [--tuning 4] [--held-out 4] [--out runs/servo_family] [--effects a,b]
+                                 [--doc docs/results.md]
+    python bench/servo_family.py --json --merge part1.json part2.json --doc docs/results.md
 """
 
 import argparse
@@ -23,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from servotau.experiments.servo_family import run_draw, score
+from servotau.experiments.servo_family import merge, run_draw, score, write_section
 
 HELD_OUT_SEED0 = 1000
 
@@ -39,9 +41,16 @@ def main() -> None:
                         help="effects the workbench may add in identify run (fewer: faster)")
     parser.add_argument("--max-steps", type=int, default=2, help="most effects per joint in identify run")
     parser.add_argument("--out", default="runs/servo_family", help="folder of the servo files, logs and motor files")
+    parser.add_argument("--doc", metavar="MD", help="write the section of this results document (docs/results.md)")
+    parser.add_argument("--merge", nargs="+", metavar="JSON",
+                        help="run nothing: merge these outputs of earlier runs (e.g. parts run in parallel)")
     args = parser.parse_args()
     if args.tuning < 0 or args.held_out < 0 or args.tuning + args.held_out == 0:
         parser.error("--tuning and --held-out: expected integers >= 0, not both 0")
+    if args.merge:
+        result = merge([json.loads(Path(p).read_text()) for p in args.merge])
+        finish(result, args.doc)
+        return
     k6 = tuple(float(x) for x in args.k6.split(","))
     start = time.perf_counter()
     say = lambda msg: print(f"[{time.perf_counter() - start:7.1f} s] {msg}", file=sys.stderr, flush=True)  # noqa: E731
@@ -55,6 +64,15 @@ def main() -> None:
               "all": score([x for r in rows.values() for x in r], k6),
               "draws": {part: r for part, r in rows.items()},
               "seconds": round(time.perf_counter() - start, 1)}
+    finish(result, args.doc)
+
+
+def finish(result: dict, doc: str | None) -> None:
+    """Print the result; with ``doc``, write its section there."""
+    if doc:
+        from servotau.config import CONFIG_DIR, load_toml
+
+        write_section(result, Path(doc), load_toml(CONFIG_DIR / "control.toml").data["defaults"])
     print(json.dumps(result))
 
 

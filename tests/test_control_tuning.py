@@ -42,10 +42,14 @@ def test_loop_model_refuses_a_non_positive_k_tau():
         LoopModel(**{**KNEE, "k_tau": -1.0})
 
 
-def test_shipped_config_passes_the_check(info):
+def test_shipped_config_passes_the_check_and_its_velocity_gain_follows_k_v(info):
     radii = check_predicted_stable(config(info), info, "motors/hrp2_sim_deadband.toml")
     assert set(radii) == set(config(info).torque_joints)
     assert all(r <= RHO_MAX for r in radii.values())
+    cfg = config(info)
+    knee = cfg.gains["RLEG_JOINT3"]
+    m = cfg.motors["RLEG_JOINT3"]
+    assert m.k_tau * (1 + knee.k_p) * knee.k_d == pytest.approx(0.15 * m.k_v)  # K6 = 1: k7 = 0.15 k_v
 
 
 def test_a_model_predicting_a_ringing_torque_loop_is_refused_naming_the_joint(info, tmp_path):
@@ -72,6 +76,6 @@ def test_velocity_gain_as_a_share_of_the_identified_k_v(info):
 
 def test_k7_and_k7_per_k_v_together_are_refused(info):
     data = copy.deepcopy(load_toml(CONFIG_DIR / "control.toml").data)
-    data["defaults"]["k7_per_k_v"] = 0.2
+    data["defaults"].update({"k7_per_k_v": 0.2, "k7": 0.001})
     with pytest.raises(ConfigError, match=r"k7.*either k7_per_k_v or k7, not both"):
         ControlConfig.from_mapping(data, info)

@@ -95,7 +95,7 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
     if k6 is not None:
         every_joint({"k6": k6}, drop=("k_s",))
     if k7 is not None:  # a constant velocity gain for the whole run
-        every_joint({"k7": k7, "k7_scaling": "constant"}, drop=("k_d",))
+        every_joint({"k7": k7, "k7_scaling": "constant"}, drop=("k_d", "k7_per_k_v"))
     if k_iq is not None:
         every_joint({"k_iq": k_iq})
     if motors is not None:
