@@ -44,6 +44,8 @@ def main() -> None:
     parser.add_argument("--doc", metavar="MD", help="write the section of this results document (docs/results.md)")
     parser.add_argument("--merge", nargs="+", metavar="JSON",
                         help="run nothing: merge these outputs of earlier runs (e.g. parts run in parallel)")
+    parser.add_argument("--from-rows", action="store_true",
+                        help="run nothing: score the draws finished under --out (their row.json)")
     args = parser.parse_args()
     if args.tuning < 0 or args.held_out < 0 or args.tuning + args.held_out == 0:
         parser.error("--tuning and --held-out: expected integers >= 0, not both 0")
@@ -52,6 +54,17 @@ def main() -> None:
         finish(result, args.doc)
         return
     k6 = tuple(float(x) for x in args.k6.split(","))
+    if args.from_rows:
+        rows = {"tuning": [], "held_out": []}
+        for path in sorted(Path(args.out).glob("draw_*/row.json"), key=lambda p: int(p.parent.name[5:])):
+            row = json.loads(path.read_text())
+            rows["held_out" if row["seed"] >= HELD_OUT_SEED0 else "tuning"].append(row)
+        finish({"k6": list(k6), "seeds": {p: [r["seed"] for r in v] for p, v in rows.items()},
+                "effects": args.effects.split(","), "max_steps": args.max_steps,
+                "parts": {p: score(v, k6) for p, v in rows.items()},
+                "all": score([x for v in rows.values() for x in v], k6), "draws": rows,
+                "seconds": None}, args.doc)
+        return
     start = time.perf_counter()
     say = lambda msg: print(f"[{time.perf_counter() - start:7.1f} s] {msg}", file=sys.stderr, flush=True)  # noqa: E731
     seeds = {"tuning": list(range(args.tuning)),

@@ -19,6 +19,7 @@ the same field names as config/servo.toml (read back by :func:`servotau.simrobot
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -142,11 +143,13 @@ def run_draw(seed: int, out: Path, k6: tuple[float, ...], *, effects: tuple[str,
                       for j, label in enumerate(LEG_LABELS)}
     say(f"draw {seed}: " + ", ".join(f"{n}: {sum(v for w in wins[n].values() for v in w.values())}/12"
                                      f"{' TRIP' if tripped[n] else ''}" for n in wins))
-    return {"seed": seed, "servo": str(servo), "motors": str(motors), "identify_seconds": round(t_ident, 1),
-            "choices": {j: c.to_dict() for j, c in report.choices.items()},
-            "mean_mrad": {n: e[0].tolist() for n, e in errors.items()},
-            "max_mrad": {n: e[1].tolist() for n, e in errors.items()},
-            "tripped": tripped, "wins": wins}
+    row = {"seed": seed, "servo": str(servo), "motors": str(motors), "identify_seconds": round(t_ident, 1),
+           "choices": {j: c.to_dict() for j, c in report.choices.items()},
+           "mean_mrad": {n: e[0].tolist() for n, e in errors.items()},
+           "max_mrad": {n: e[1].tolist() for n, e in errors.items()},
+           "tripped": tripped, "wins": wins}
+    (folder / "row.json").write_text(json.dumps(row, indent=1))  # kept if a longer benchmark is stopped
+    return row
 
 
 def score(rows: list[dict], k6: tuple[float, ...]) -> dict:
@@ -181,7 +184,7 @@ def merge(results: list[dict]) -> dict:
     return {**results[0], "seeds": {p: [x["seed"] for x in rows] for p, rows in draws.items()}, "draws": draws,
             "parts": {p: score(rows, k6) for p, rows in draws.items()},
             "all": score([x for rows in draws.values() for x in rows], k6),
-            "seconds": max(r["seconds"] for r in results)}
+            "seconds": max((r["seconds"] or 0) for r in results) or None}
 
 
 def section_markdown(result: dict, control: dict) -> str:
@@ -220,7 +223,8 @@ def section_markdown(result: dict, control: dict) -> str:
             runs = "; ".join(f"{n}{' TRIP' if r['tripped'].get(n) else ''}: "
                              + " ".join(f"{v:.3g}" for v in r["max_mrad"][n]) for n in r["max_mrad"])
             lines.append(f"- {part} seed {r['seed']}: {runs}")
-    lines += ["", f"Measured once ({result['seconds']:.0f} s on the shared 2-core machine).", END]
+    took = f", {result['seconds']:.0f} s" if result.get("seconds") else ""
+    lines += ["", f"Measured once on the shared 2-core machine{took}.", END]
     return "\n".join(lines)
 
 
