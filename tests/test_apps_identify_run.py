@@ -71,19 +71,20 @@ def _without_knee(text: str) -> str:
     return head + "[joints.RLEG_JOINT4]" + rest.split("[joints.RLEG_JOINT4]", 1)[1]
 
 
-def _stiff_knee(text: str) -> str:
+def _negative_damping(text: str) -> str:
+    """The knee's model with k_v < 0: negative damping, a loop the model itself predicts unstable."""
     head, rest = text.split("[joints.RLEG_JOINT3]", 1)
-    line = next(v for v in rest.splitlines() if v.startswith("k_tau = "))
-    return head + "[joints.RLEG_JOINT3]" + rest.replace(line, "k_tau = 5e-9", 1)
+    line = next(v for v in rest.splitlines() if v.startswith("k_v = "))
+    return head + "[joints.RLEG_JOINT3]" + rest.replace(line, "k_v = -0.001", 1)
 
 
 @pytest.mark.parametrize("edit, message", [
     (_without_knee, r"torque_joints.*RLEG_JOINT3.*expected joints with a motor model"),
-    (_stiff_knee, r"joint \"RLEG_JOINT3\": fields 'joints\.RLEG_JOINT3\.k_tau' = 5e-09.*predicts an unstable torque "
-                  "loop"),
+    (_negative_damping, r"joints\.RLEG_JOINT3\.k_v.*-0\.001.*expected"),
 ])
 def test_experiment_refuses_a_bad_motor_file_before_anything_moves(tmp_path, capsys, edit, message):
-    """A motor file without a torque joint, or whose model predicts an unstable loop: exit 2, the joint named."""
+    """A motor file without a torque joint, or whose model has negative damping: exit 2, the joint and field
+    named (a model predicting a ringing loop at the gains: tests/test_control_tuning.py)."""
     bad = tmp_path / "motors.toml"
     bad.write_text(edit((CONFIG_DIR / "motors" / "hrp2_sim_identified.toml").read_text()))
     out = tmp_path / "out"
@@ -113,3 +114,11 @@ def test_run_writes_the_controllers_motor_file_with_each_joints_choice(tmp_path,
         assert ("deadzone" in params[j].extra) == (c["dead_band_kept"] or "deadzone" in c["effects"])
     header = out.read_text().split("version = 1")[0]
     assert "servotau identify run" in header and "RLEG_JOINT3:" in header
+
+
+def test_experiment_refuses_a_bad_servo_file_before_anything_moves(tmp_path, capsys):
+    out = tmp_path / "out"
+    servo = servo_file(tmp_path, "kp = 19608.0", "kp = -19608.0")
+    assert cli(["experiment", "force", "--servo", str(servo), "--out", str(out)]) == 2
+    assert re.search(r"servo\.toml: field 'groups\.knee\.kp'", capsys.readouterr().err)
+    assert not out.exists()
