@@ -12,6 +12,11 @@ Each run is deterministic (in-process lock-step backend, fixed seed; :mod:`.comm
 - ``estimation`` (:mod:`.estimation`): estimated vs true joint torques on the motion run (K6 = 1), and the
   identified motor models against the simulator's servo parameters (config/servo.toml, evaluation only).
 
+``motion`` and ``force`` run on any servo and motor file: ``servotau experiment motion --servo FILE --motors FILE
+--out DIR`` (the servo file has config/servo.toml's field names; the motor file is e.g. ``servotau identify run``'s);
+both are checked before anything moves (:func:`check_files`), only the K6 sweep (or the force run) is run, and
+docs/results.md is left alone unless ``--doc`` names it.
+
 Every experiment writes ``<out>/<name>/``: ``summary.json``, tables (CSV and Markdown), PNG figures and,
 with ``--rerun``, one ``.rrd`` per run; then :func:`~.report.write_results` regenerates ``docs/results.md`` from
 all the summaries found under ``<out>`` and the prose of ``results.md.in``. A safety trip is a result (its message
