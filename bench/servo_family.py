@@ -44,6 +44,8 @@ def main() -> None:
     parser.add_argument("--doc", metavar="MD", help="write the section of this results document (docs/results.md)")
     parser.add_argument("--merge", nargs="+", metavar="JSON",
                         help="run nothing: merge these outputs of earlier runs (e.g. parts run in parallel)")
+    parser.add_argument("--skip-done", action="store_true",
+                        help="reuse the rows of draws already finished under --out (their row.json)")
     parser.add_argument("--from-rows", action="store_true",
                         help="run nothing: score the draws finished under --out (their row.json)")
     args = parser.parse_args()
@@ -70,8 +72,13 @@ def main() -> None:
     seeds = {"tuning": list(range(args.tuning)),
              "held_out": list(range(HELD_OUT_SEED0, HELD_OUT_SEED0 + args.held_out))}
     effects = tuple(e for e in args.effects.split(",") if e)
-    rows = {part: [run_draw(s, Path(args.out), k6, effects=effects, max_steps=args.max_steps, progress=say)
-                   for s in part_seeds] for part, part_seeds in seeds.items()}
+    def row(seed: int) -> dict:
+        done = Path(args.out) / f"draw_{seed}" / "row.json"
+        if args.skip_done and done.exists():
+            return json.loads(done.read_text())
+        return run_draw(seed, Path(args.out), k6, effects=effects, max_steps=args.max_steps, progress=say)
+
+    rows = {part: [row(s) for s in part_seeds] for part, part_seeds in seeds.items()}
     result = {"k6": list(k6), "seeds": seeds, "effects": list(effects), "max_steps": args.max_steps,
               "parts": {part: score(r, k6) for part, r in rows.items()},
               "all": score([x for r in rows.values() for x in r], k6),
