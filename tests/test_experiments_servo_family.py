@@ -40,3 +40,21 @@ def test_score_counts_wins_of_tripped_runs_as_losses():
     s = score([row], (1.0, 0.5))
     assert s["K6=1"] == {"wins": 1, "cases": 2, "share": 0.5, "trips": []}
     assert s["K6=0.5"]["trips"] == [1]
+
+
+def test_merged_parts_give_the_section_with_targets_met_or_missed():
+    from servotau.experiments.servo_family import merge, section_markdown
+
+    def row(seed, win, trip=None):
+        return {"seed": seed, "identify_seconds": 10.0, "tripped": {"K6=1": trip},
+                "max_mrad": {"position": [1.0] * 6, "K6=1": [0.5] * 6},
+                "wins": {"K6=1": {j: {"mean": win, "max": win} for j in "abcdef"}}}
+
+    a = {"k6": [1.0], "effects": ["deadzone"], "max_steps": 1, "seconds": 5.0,
+         "draws": {"tuning": [row(0, True)], "held_out": []}}
+    b = {**a, "draws": {"tuning": [], "held_out": [row(1000, False, "trip")]}}
+    m = merge([a, b])
+    assert m["parts"]["tuning"]["K6=1"]["share"] == 1.0 and m["parts"]["held_out"]["K6=1"]["trips"] == [1000]
+    assert m["all"]["K6=1"] == {"wins": 12, "cases": 24, "share": 0.5, "trips": [1000]}
+    text = section_markdown(m, {"k_p": 0.5, "k7_per_k_v": 0.15, "k_iq": 2.0})
+    assert "| all | 2 | 12/24 = 50 %, TRIP seeds [1000] |" in text and "K6=1 MISSED" in text

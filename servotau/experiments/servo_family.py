@@ -184,7 +184,7 @@ def merge(results: list[dict]) -> dict:
     return {**results[0], "seeds": {p: [x["seed"] for x in rows] for p, rows in draws.items()}, "draws": draws,
             "parts": {p: score(rows, k6) for p, rows in draws.items()},
             "all": score([x for rows in draws.values() for x in rows], k6),
-            "seconds": max((r["seconds"] or 0) for r in results) or None}
+            "seconds": None}  # the parts may reuse draws of earlier runs: their own times are in the rows
 
 
 def section_markdown(result: dict, control: dict) -> str:
@@ -223,7 +223,9 @@ def section_markdown(result: dict, control: dict) -> str:
             runs = "; ".join(f"{n}{' TRIP' if r['tripped'].get(n) else ''}: "
                              + " ".join(f"{v:.3g}" for v in r["max_mrad"][n]) for n in r["max_mrad"])
             lines.append(f"- {part} seed {r['seed']}: {runs}")
-    took = f", {result['seconds']:.0f} s" if result.get("seconds") else ""
+    ident = [r["identify_seconds"] for rows in result["draws"].values() for r in rows]
+    took = (f", {result['seconds']:.0f} s" if result.get("seconds")
+            else f", identification {min(ident):.0f}-{max(ident):.0f} s per draw" if ident else "")
     lines += ["", f"Measured once on the shared 2-core machine{took}.", END]
     return "\n".join(lines)
 
