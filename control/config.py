@@ -67,6 +67,9 @@ class ServoGains:
 
     k6: float | None = setting(None, unit="-, 1 = the native servo", min=0)
     k7: float | None = setting(None, unit="s", min=0)
+    # K7 as a share of the joint's identified k_v (the servo's own damping, which the feedforward K_v dq_hat cancels
+    # with a filtered velocity): k7 = k7_per_k_v * k_v, the tuning following the identified model
+    k7_per_k_v: float | None = setting(None, unit="-", min=0)
     k7_scaling: str = setting("constant", choices=K7_SCALINGS)
 
 
@@ -273,7 +276,7 @@ class ControlConfig:
             if j not in torque_joints:
                 raise joints.error(j, joints.data[j], f"a table for a joint listed in torque_joints {torque_joints}")
         base = _gain_tables(defaults)
-        gains = {j: _joint_gains(joints.section(j, {}), defaults, base, motors[j].k_tau) for j in torque_joints}
+        gains = {j: _joint_gains(joints.section(j, {}), defaults, base, motors[j]) for j in torque_joints}
         force = _force(root.section("force")) if "force" in root else None
 
         contacts = root.data.get("contacts", [])
@@ -316,27 +319,30 @@ _SERVO_KEYS = tuple(f.name for f in fields(ServoGains))
 def _gain_tables(sec: Section, base: tuple[JointGains, ServoGains] | None = None) -> tuple[JointGains, ServoGains]:
     """The gains of a ``[defaults]`` or ``[joints.<name>]`` table (missing keys: ``base``, else the defaults),
     k6/k7 not yet converted."""
-    for a, b in (("k6", "k_s"), ("k7", "k_d")):
+    for a, b in (("k6", "k_s"), ("k7", "k_d"), ("k7_per_k_v", "k_d"), ("k7_per_k_v", "k7")):
         if a in sec and b in sec:
             raise sec.error(b, sec.data[b], f"either {a} or {b}, not both")
     gains = load_dataclass(JointGains, sec, ignore=_SERVO_KEYS, base=base and base[0])
     return gains, load_dataclass(ServoGains, sec, ignore=_GAIN_KEYS, base=base and base[1])
 
 
-def _joint_gains(own: Section, defaults: Section, base: tuple[JointGains, ServoGains], k_tau: float) -> JointGains:
-    """Gains of one joint: its own table first, then [defaults]; k6/k7 are converted to k_s/k_d, and k_d is
-    divided by sqrt(K6) with ``k7_scaling = "inverse_sqrt_k6"``."""
+def _joint_gains(own: Section, defaults: Section, base: tuple[JointGains, ServoGains], motor: MotorModel) -> JointGains:
+    """Gains of one joint: its own table first, then [defaults]; k6/k7 are converted to k_s/k_d (k7_per_k_v: k7
+    from the joint's identified k_v), and k_d is divided by sqrt(K6) with ``k7_scaling = "inverse_sqrt_k6"``."""
     gains, servo = _gain_tables(own, base)
+    k_tau = motor.k_tau
 
-    def native_form(native: str, si: str) -> bool:
-        # The joint's own table wins over [defaults], whichever of the two forms each uses.
-        return next((native in sec for sec in (own, defaults) if native in sec or si in sec), False)
+    def form(key: str, others: tuple[str, ...]) -> bool:
+        # The joint's own table wins over [defaults], whichever of the forms each uses.
+        return next((key in sec for sec in (own, defaults) if key in sec or any(o in sec for o in others)), False)
 
     k_s, k_d = gains.k_s, gains.k_d
-    if native_form("k6", "k_s"):
+    if form("k6", ("k_s",)):
         k_s = float(ks_from_k6(k_tau, gains.k_p, servo.k6)[0])
-    if native_form("k7", "k_d"):
+    if form("k7", ("k_d", "k7_per_k_v")):
         k_d = float(kd_from_k7(k_tau, gains.k_p, servo.k7)[0])
+    elif form("k7_per_k_v", ("k_d", "k7")):
+        k_d = float(kd_from_k7(k_tau, gains.k_p, servo.k7_per_k_v * motor.k_v)[0])
     if servo.k7_scaling == "inverse_sqrt_k6":
         k6 = k_tau * (1.0 + gains.k_p) * k_s
         if not k6 > 0:

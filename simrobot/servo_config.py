@@ -124,3 +124,10 @@ def load_servo_params(
             target = values if f in values else hidden
             target[f][joints] = v
     return ServoParams(**values, **hidden, motor_inertia=np.asarray(armature, dtype=float).copy())
+
+
+def check_servo_file(path: str | Path, joint_names: Sequence[str]) -> ServoParams:
+    """Read and validate the servo file ``path`` for ``joint_names`` before a robot is built from it: a missing
+    joint or field, a negative or zero gain raise a :class:`~servotau.errors.ConfigError` naming the file, the
+    field and the joints (armature taken as zero: only the file is checked)."""
+    return load_servo_params(path, joint_names, np.zeros(len(joint_names)))

@@ -61,6 +61,7 @@ def test_k7_scaling_divides_the_velocity_gain_by_sqrt_k6():
     """k7_scaling = "inverse_sqrt_k6": K7 = k7 / sqrt(K6) per joint (the given k7 is the value at K6 = 1);
     "constant" keeps k7; a joint table overrides [defaults]."""
     data = _with("defaults.k6", 0.25)
+    data["defaults"].pop("k7_per_k_v", None)  # the shipped form; k7 [s] instead
     data["defaults"].update({"k7": 0.001, "k7_scaling": "inverse_sqrt_k6"})
     data["joints"] = {"RLEG_JOINT2": {"k7_scaling": "constant"}}
     cfg = ControlConfig.from_mapping(data, INFO)

@@ -78,6 +78,7 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
     those axes."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
+    from servotau.control.tuning import check_predicted_stable
 
     data = copy.deepcopy(load_toml(CONFIG_DIR / "control.toml").data)
 
@@ -94,7 +95,7 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
     if k6 is not None:
         every_joint({"k6": k6}, drop=("k_s",))
     if k7 is not None:  # a constant velocity gain for the whole run
-        every_joint({"k7": k7, "k7_scaling": "constant"}, drop=("k_d",))
+        every_joint({"k7": k7, "k7_scaling": "constant"}, drop=("k_d", "k7_per_k_v"))
     if k_iq is not None:
         every_joint({"k_iq": k_iq})
     if motors is not None:
@@ -104,7 +105,9 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
     if force_axes:
         data["force"] = {"sensor": "right_ankle", "frame": "ft_right_ankle", "offset": [0.0, 0.0, -0.02],
                          "axes": list(force_axes), "k_f": [FORCE_KF] * len(force_axes)}
-    return ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
+    config = ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
+    check_predicted_stable(config, info, str(data["motors"]))  # before anything moves
+    return config
 
 
 def motors_file() -> str:
@@ -114,15 +117,25 @@ def motors_file() -> str:
     return str(load_toml(CONFIG_DIR / "control.toml").data["motors"])
 
 
-def ft_offsets_hanging(seed: int, est_cfg) -> np.ndarray:
+def sim_config(scenario: str, seed: int, servo: str | None = None):
+    """The simulator's config: ``config/scenarios/<scenario>.toml``, ``seed`` and the servo file ``servo`` (None:
+    config/servo.toml)."""
+    from servotau.config import resolve_config_path
+    from servotau.simrobot.sim import SimConfig
+
+    extra = {} if servo is None else {"servo_path": resolve_config_path(servo)}
+    return SimConfig.named(scenario, seed=seed, **extra)
+
+
+def ft_offsets_hanging(seed: int, est_cfg, servo: str | None = None) -> np.ndarray:
     """F/T offsets calibrated with the robot hanging, feet free (the paper's practice before lowering it).
 
     The simulated sensor offsets are drawn from the seed, so the same seed's hanging robot has the same sensors.
     """
     from servotau.estimation import calibrate_ft_offsets
-    from servotau.simrobot.sim import SimConfig, SimRobot
+    from servotau.simrobot.sim import SimRobot
 
-    robot = SimRobot(SimConfig.named("hanging", seed=seed))
+    robot = SimRobot(sim_config("hanging", seed, servo))
     frames = []
     for _ in range(int(SETTLE / robot.period)):
         frames.append(robot.read())
@@ -210,7 +223,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
              swing: float | None = SWING, force_profile=None, duration: float | None = None, seed: int = SEED,
              rerun: str | None = None, posture: str = "compatible", k7: float | None = None,
              motors: str | None = None, velocity_feedforward: str | None = None, k_iq: float | None = None,
-             force_axes: tuple[str, ...] = FORCE_AXES) -> Run:
+             force_axes: tuple[str, ...] = FORCE_AXES, servo: str | None = None) -> Run:
     """One run: settle in position mode, switch to ``mode``, hold ``HOLD`` s, then the motion or force task.
 
     Args:
@@ -230,6 +243,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
             config's).
         k_iq: Position-integral rate [1/s] of the torque joints (None: the config's; 0: off).
         force_axes: Regulated axes of the force task.
+        servo: Servo config file of the simulated robot (None: config/servo.toml).
         posture: With a force task, the joint reference: ``compatible`` follows the measured motion along the
             task directions (:class:`~servotau.control.trajectory.ForceCompatiblePosture`, paper 5.4), ``start``
             is the start posture.
@@ -239,18 +253,22 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     from servotau.control.trajectory import ForceCompatiblePosture, right_leg_swing
     from servotau.estimation import TorqueEstimator
     from servotau.hal.backends.inprocess import InProcessBackend
-    from servotau.simrobot.sim import SimConfig, SimRobot
+    from servotau.simrobot.sim import SimRobot
 
     if posture not in ("compatible", "start"):
         raise ValueError(f"posture = {posture!r}: expected 'compatible' or 'start'")
-    backend = InProcessBackend(SimRobot(SimConfig.named(scenario, seed=seed)))
+    backend = InProcessBackend(SimRobot(sim_config(scenario, seed, servo)))
     info = backend.info
     legs = np.array([info.joint_names.index(j) for j in LEG])
     est_cfg = estimator_config()
-    manager = ControlManager(info, control_config(info, k6, force_axes if force_profile is not None else (), k7,
-                                                  motors, velocity_feedforward, k_iq))
+    try:  # the motor file and gains are checked before anything moves
+        manager = ControlManager(info, control_config(info, k6, force_axes if force_profile is not None else (), k7,
+                                                      motors, velocity_feedforward, k_iq))
+    except BaseException:
+        backend.close()
+        raise
     # hanging: the feet touch nothing while settling; otherwise calibrate on the same robot hanging
-    offsets = None if scenario == "hanging" else (lambda frames: ft_offsets_hanging(seed, est_cfg))
+    offsets = None if scenario == "hanging" else (lambda frames: ft_offsets_hanging(seed, est_cfg, servo))
     loop = ControlLoop(backend, manager, TorqueEstimator(info, est_cfg), mode=mode, ft_offsets=offsets)
     task, run = _Task(loop), Run(name)
     hooks = [_Recorder(run, task, legs, force_profile is not None)]

@@ -69,13 +69,16 @@ def force_metrics(run: Run, key: str = "f_hat") -> dict:
 
 
 def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | None = None,
-              posture: str = "compatible", compare: bool | None = None) -> dict:
+              posture: str = "compatible", compare: bool | None = None, servo: str | None = None,
+              motors: str | None = None) -> dict:
     """Fig. 5 metrics of the force run (reference ``posture``); ``compare`` (default: full runs that are not
-    given) also runs the other posture reference and reports its measured metrics next to them."""
+    given) also runs the other posture reference and reports its measured metrics next to them. ``servo``,
+    ``motors``: the servo and motor files (None: the config's); with either, no comparison runs by default."""
     out = out / "force"
     out.mkdir(parents=True, exist_ok=True)
-    compare = (run is None and not quick) if compare is None else compare
-    run = run or force_run(quick, out, rerun, posture)
+    given = {k: v for k, v in (("servo", servo), ("motors", motors)) if v is not None}
+    compare = (run is None and not quick and not given) if compare is None else compare
+    run = run or force_run(quick, out, rerun, posture, **given)
     metrics = _force_run_metrics(run)
     columns = {"measured (compensated f_hat)": metrics["measured"], "true (sole contact)": metrics["true"]}
     other_name, other_tripped = None, None
@@ -86,7 +89,7 @@ def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | No
                   **{label: overrides for label, overrides in VARIANTS.items() if label != "paper model"}}
         other_tripped = {}
         for label, overrides in others.items():
-            other = force_run(quick, out, False, **{"posture": posture, **overrides})
+            other = force_run(quick, out, False, **{"posture": posture, **given, **overrides})
             if other.tripped:
                 other_tripped[label] = other.tripped
             metrics[f"measured, {label}"] = _force_run_metrics(other)["measured"]
@@ -101,7 +104,7 @@ def run_force(out: Path, quick: bool = False, rerun: bool = False, run: Run | No
         _plot_force(out / "fig5_force_tracking.png", run)
     summary = {"experiment": "force", "quick": quick, "k6": FORCE_K6, "k_f": FORCE_KF, "amplitude_N": FORCE_AMPLITUDE,
                "frequency_Hz": FORCE_FREQUENCY, "axes": list(FORCE_AXES), "posture": posture,
-               "compared_posture": other_name,
+               "compared_posture": other_name, "servo": servo or "servo.toml", "motors": motors,
                "tripped": run.tripped, "compared_tripped": other_tripped, "metrics": metrics, "table": table}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary

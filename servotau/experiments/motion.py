@@ -54,14 +54,21 @@ def motion_errors(run: Run) -> tuple[np.ndarray, np.ndarray]:
     return 1e3 * np.sqrt(np.mean(e**2, axis=0)), 1e3 * np.max(np.abs(e), axis=0)
 
 
-def motion_runs(quick: bool, out: Path, rerun: bool = False) -> dict[str, Run]:
-    """The position-servo run and the torque runs of the K6 sweep (quick: K6 = 1 and 0.1 only)."""
-    gains = (1.0, 0.1) if quick else K6_VALUES
+def motion_runs(quick: bool, out: Path, rerun: bool = False, servo: str | None = None, motors: str | None = None,
+                gains: tuple[float, ...] | None = None) -> dict[str, Run]:
+    """The position-servo run and the torque runs of the K6 sweep (quick: K6 = 1 and 0.1 only; ``gains``: these
+    K6). With a ``servo`` or ``motors`` file (relative to config/ or a path) only the sweep runs, on that servo
+    with that motor file (the variants compare motor files of the nominal servo)."""
+    gains = gains or ((1.0, 0.1) if quick else K6_VALUES)
+    given = {"servo": servo, "motors": motors}
     runs = {"position": simulate("motion-position", mode="position", k6=None,
-                                 rerun=rerun_target(out, rerun, "motion-position"))}
+                                 rerun=rerun_target(out, rerun, "motion-position"), **given)}
     for k6 in gains:
         name = run_label(k6)
-        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, rerun=rerun_target(out, rerun, f"motion-{name}"))
+        runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, rerun=rerun_target(out, rerun, f"motion-{name}"),
+                              **given)
+    if servo is not None or motors is not None:
+        return runs
     for k6, k7 in (() if quick else MOTION_EXTRA):
         name = f"{run_label(k6)} k7={k7:g}"
         runs[name] = simulate(f"motion-{name}", mode="torque", k6=k6, k7=k7)
@@ -75,11 +82,13 @@ def motion_runs(quick: bool, out: Path, rerun: bool = False) -> dict[str, Run]:
     return runs
 
 
-def run_motion(out: Path, quick: bool = False, rerun: bool = False, runs: dict | None = None) -> dict:
-    """Tables 2-3 and Fig. 4 of the paper; returns (and writes) the summary."""
+def run_motion(out: Path, quick: bool = False, rerun: bool = False, runs: dict | None = None,
+               servo: str | None = None, motors: str | None = None) -> dict:
+    """Tables 2-3 and Fig. 4 of the paper (on ``servo`` with ``motors`` if given, see :func:`motion_runs`); returns
+    (and writes) the summary."""
     out = out / "motion"
     out.mkdir(parents=True, exist_ok=True)
-    runs = runs or motion_runs(quick, out, rerun)
+    runs = runs or motion_runs(quick, out, rerun, servo, motors)
     errors = {name: motion_errors(r) for name, r in runs.items()}
     pos_mean, pos_max = errors["position"]
     mean_rows, max_rows = [], []
@@ -98,7 +107,7 @@ def run_motion(out: Path, quick: bool = False, rerun: bool = False, runs: dict |
                         for j, label in enumerate(LEG_LABELS)}
     _plot_motion(out / "fig4_motion_errors.png", runs)
     summary = {"experiment": "motion", "quick": quick, "swing": SWING, "controllers": list(runs),
-               "motors": motors_file(),
+               "motors": motors or motors_file(), "servo": servo or "servo.toml",
                "mean_mrad": {n: errors[n][0].tolist() for n in runs},
                "max_mrad": {n: errors[n][1].tolist() for n in runs},
                "tripped": {n: r.tripped for n, r in runs.items()}, "beats_position": passes, "tables": tables}

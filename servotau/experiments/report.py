@@ -148,7 +148,11 @@ def write_results(out: Path, doc: Path) -> str:
     shown = shown.relative_to(REPO_ROOT) if shown.is_relative_to(REPO_ROOT) else shown  # no machine path in the doc
     gains = load_toml(CONFIG_DIR / "control.toml").data["defaults"]  # the runs' gains besides K6
     scaling = gains["k7_scaling"]
-    k7 = phrase("k7_inverse_sqrt_k6" if scaling == "inverse_sqrt_k6" else "k7_constant", k7=gains["k7"])
+    if "k7_per_k_v" in gains:  # the velocity gain as a share of each joint's identified k_v
+        k7 = phrase("k7_per_k_v" + ("_inverse_sqrt_k6" if scaling == "inverse_sqrt_k6" else ""),
+                    share=gains["k7_per_k_v"])
+    else:
+        k7 = phrase("k7_inverse_sqrt_k6" if scaling == "inverse_sqrt_k6" else "k7_constant", k7=gains["k7"])
     paras = block("header", shown=shown, seed=SEED, variant=ESTIMATOR_VARIANT, k_p=gains["k_p"], k7=k7,
                   k7_scaling=scaling, k_iq=gains["k_iq"], settle=SETTLE, hold=HOLD)
     for name, section in SECTIONS:
