@@ -324,6 +324,8 @@ class ControlLoop:
                         elif pending.action in actions:
                             refusal = "the run is stopping" if state == "stopping" else actions[pending.action](
                                 pending.args, tick)
+                            if refusal is None and state == "holding":  # after a reset: the new task drives again
+                                held, state = None, "running"
                             operator.answer(pending, refusal is None, state, refusal)
                         elif pending.action != "reset":
                             operator.answer(pending, False, state, f"{pending.action}: not served by this loop")

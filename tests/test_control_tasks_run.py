@@ -206,6 +206,56 @@ def test_the_operator_starts_another_task_from_rest(tmp_path):
     assert runner.task.name == "wave"
 
 
+class RobotOff(Counting):
+    """Reports its servos cut (a robot-side trip) for robot times in [0.3, 0.4) s."""
+
+    _frame_time = 0.0  # [s] robot time of the last frame read
+
+    @property
+    def robot_state(self):
+        t = self._frame_time
+        return "servo_off" if 0.3 <= t < 0.4 else super().robot_state
+
+    def read(self, timeout=None):
+        f = super().read(timeout)
+        self._frame_time = float(f.time)
+        return f
+
+
+def test_after_a_trip_and_a_reset_the_operator_starts_a_task_that_drives_again(tmp_path):
+    """A robot-side trip latches the hold; once the robot is back, a reset, then ``start``: the new task leaves the
+    held posture and runs to its end (the reference is no longer the hold)."""
+    (tmp_path / "wave.toml").write_text(WAVE)
+    channel = OperatorChannel()
+    answers = {}
+
+    def ask(key, action, **args):
+        answers[key] = None
+        threading.Thread(target=lambda: answers.__setitem__(key, channel.request(action, 30, **args))).start()
+
+    def at(tick):
+        if float(tick.frame.time) >= 0.45 and "reset" not in answers:
+            ask("reset", "reset")
+        if answers.get("reset") is not None and answers["reset"].ok and "start" not in answers:
+            ask("start", "start", task=str(tmp_path / "wave.toml"))
+
+    backend = RobotOff(SimRobot(SimConfig.named("hanging", seed=0)))
+    try:
+        task = FileTask.load("hold").shortened(0.8, settle=SETTLE)
+        runner = TaskRunner(task, backend.info)
+        record = Record(runner, at=at)
+        loop = ControlLoop(backend, runner.manager(), hooks=[runner, record], settle=task.settle)
+        result = runner.run(loop, operator=channel, hold_timeout=2.0)  # a regression ends, not hangs
+    finally:
+        backend.close()
+    assert result.trips == 1 and "robot_servo_off" in result.tripped and result.resets == 1
+    assert answers["start"] is not None and answers["start"].ok, answers
+    assert result.end == "completed" and record.phases[-1] == "wave"
+    knee = backend.info.joint_index("RLEG_JOINT3")
+    wave = np.array([q[knee] for q, ph in zip(record.q_des, record.phases, strict=True) if ph == "wave"])
+    assert np.ptp(wave) > 0.02  # the wave drives the knee (+-0.05 rad): not the held posture
+
+
 @pytest.mark.slow
 def test_the_force_task_file_reproduces_the_force_experiment():
     """config/tasks/force.toml, whole (1 s hold, 6 s of the sinusoid): the apex error of the measured force within

@@ -207,7 +207,9 @@ class TaskRunner(LoopHook):
             return 'start: expected {"task": a task name, file or module:attribute}'
         if self.manager().tripped:
             return "start: a safety trip is latched: reset first"
-        last = self._last or TrajectoryPoint(tick.frame.q.copy(), np.zeros(self.info.nq), np.zeros(self.info.nq))
+        # from this tick's reference: the held posture after a reset, the start posture while settling
+        last = tick.reference or self._last or TrajectoryPoint(tick.frame.q.copy(), np.zeros(self.info.nq),
+                                                               np.zeros(self.info.nq))
         stop = stopping_segment(last.q, last.dq, last.ddq)
         margin = self.manager().config.safety.joint_limit_margin
         out = np.flatnonzero((stop.q1 < self.info.q_min + margin) | (stop.q1 > self.info.q_max - margin))
