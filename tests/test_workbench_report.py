@@ -78,7 +78,12 @@ def test_coefficient_units_follow_the_target_and_the_effect():
     assert coefficient_unit("coulomb", "rad", True) == "rad"
     assert coefficient_unit("direction_gain", "rad", True) == "-"
     assert coefficient_unit("elastic", "rad", True) == "rad/(rad/s^2)"
-    assert "per unit of phi" in coefficient_unit("thermal_drift", "rad", True)
+    assert coefficient_unit("backlash", "rad", True) == "rad/(rad/s^2)"
+    assert coefficient_unit("saturation", "rad", True) == "-"
+    assert coefficient_unit("thermal_drift", "rad", True) == "rad/(rad/s) with gain 0, - with gain 1"
+    from servotau.actuator.registry import effect_names
+
+    assert all("per unit of phi" not in coefficient_unit(e, "rad", True) for e in effect_names())  # every effect
 
 
 def test_correlation_band_is_1_96_over_sqrt_n(report):

@@ -69,13 +69,15 @@ def _fit(c: Comparison) -> tuple[float, str]:
 # target's own unit; a coefficient is in [target unit / unit of phi].
 PHI_UNITS = {"coulomb": "1", "coulomb_asym": "1", "stiction": "1", "stribeck": "1", "deadzone": "1", "cogging": "1",
              "dahl": "1", "lugre": "1", "viscous_power": "1", "direction_gain": "target", "motor_lag": "target",
-             "load_friction": "N m", "delay": "rad", "elastic": "rad/s^2"}
+             "load_friction": "N m", "delay": "rad", "elastic": "rad/s^2", "backlash": "rad/s^2", "saturation": "rad"}
 
 
 def coefficient_unit(name: str, si: str, effect: bool) -> str:
     """Unit of coefficient ``name`` (k_tau, k_v, offset or an effect) of a model of a target in ``si``."""
     if not effect:
         return {K_TAU: f"{si}/(N m)", K_V: f"{si}/(rad/s)", OFFSET: si}.get(name, "?")
+    if name == "thermal_drift":  # phi = h dq (shape gain 0) or -h u_tau (gain 1; u_tau in the target's unit)
+        return f"{si}/(rad/s) with gain 0, - with gain 1"
     phi = PHI_UNITS.get(name)
     if phi is None:
         return f"{si} per unit of phi (actuator/effects/{name}.py)"

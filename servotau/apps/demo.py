@@ -55,7 +55,7 @@ def main(args) -> int:
         return ctl.returncode
     mb, seconds = os.path.getsize(rrd) / 1e6, _robot_seconds(log)
     print(f"[demo] done: {rrd} ({mb:.2f} MB, {mb / seconds:.2f} MB per robot second over {seconds:.2f} s; open with "
-          f".venv/bin/rerun {rrd}), {log} ({os.path.getsize(log) / 1e6:.1f} MB)")
+          f"{Path(sys.executable).parent / 'rerun'} {rrd}), {log} ({os.path.getsize(log) / 1e6:.1f} MB)")
     return 0
 
 
