@@ -127,6 +127,27 @@ def test_a_command_within_the_limits_passes_unchanged_at_any_speed_under_the_vel
         lim.applied(q)
 
 
+def test_a_step_toward_the_measured_angle_is_free_and_the_limits_apply_beyond_it():
+    """q_des 15 mrad ahead of a joint moving at 2 rad/s; a hold behind the joint: q_des jumps to the measured angle
+    at once (no velocity or acceleration bound on that part), then moves beyond it from rest within the limits. A
+    command moving away from the joint stays bounded as before, and a NaN reading frees nothing."""
+    lim = RateLimiter(np.array([5.0]), np.array([2000.0]), DT)
+    lim.reset(np.zeros(1))
+    for k in range(1, 16):  # q_des moving at 2 rad/s
+        lim.applied(lim.bound(np.array([0.002 * k])))
+    q = np.array([0.015])  # the joint, 15 mrad behind q_des = 0.030
+    out = lim.bound(np.array([0.0]), q)  # hold 15 mrad behind the joint
+    assert out[0] <= q[0] and q[0] - out[0] <= 2000.0 * DT * DT + 1e-12  # at the joint, then from rest
+    lim.applied(out)
+    nxt = lim.bound(np.array([0.0]), q)
+    assert 0 < out[0] - nxt[0] <= 2 * 2000.0 * DT * DT + 1e-12  # accelerating from rest
+    away = lim.bound(np.array([0.5]), q)  # away from the joint: bounded
+    assert away[0] - out[0] <= 5.0 * DT + 1e-12
+    lim2 = RateLimiter(np.array([5.0]), np.array([2000.0]), DT)
+    lim2.reset(np.array([0.03]))
+    assert lim2.bound(np.array([0.0]), np.array([np.nan]))[0] >= 0.03 - 2000.0 * DT * DT - 1e-12
+
+
 @pytest.mark.parametrize(("data", "match"), [
     ({"max_velocity": -1.0}, r"field 'safety.max_velocity' = -1.0: expected a finite number > 0 \[rad/s\]"),
     ({"max_acceleration": 0}, r"field 'safety.max_acceleration' = 0: expected a finite number > 0"),

@@ -205,7 +205,7 @@ class Firmware:
             names = [self.info.joint_names[i] for i in np.flatnonzero(out != target)]
             self._warn(logging.WARNING, "clamp", f"{self.info.name}: command clamped to the joint limits: {names}")
         if running:
-            out = self._rate_limit(out)
+            out = self._rate_limit(out, np.where(valid, q, np.nan))
         if self.state == FirmwareState.RUNNING:
             self.limiter.applied(out)
         else:
@@ -267,10 +267,10 @@ class Firmware:
         self._q_hold = None if self._q_valid is None else self._q_valid.copy()
         self._hold_requested = False
 
-    def _rate_limit(self, out: np.ndarray) -> np.ndarray:
+    def _rate_limit(self, out: np.ndarray, q: np.ndarray) -> np.ndarray:
         if self.limiter.q is None:  # the first command ever: from the measured position, at rest
             self.limiter.reset(self._q_valid)
-        bounded = self.limiter.bound(out)
+        bounded = self.limiter.bound(out, q)
         over = np.abs(bounded - out) > 1e-9
         if not over.any():
             return out
