@@ -31,6 +31,7 @@ def outputs(tmp_path_factory):
     return out, summaries, doc
 
 
+@pytest.mark.slow  # the quick experiments fixture: 12 s (the CLI test below runs one in the default suite)
 def test_motion_writes_tables_and_figure_with_finite_errors(outputs):
     """The motion experiment writes the mean/max tables (CSV, Markdown), Fig. 4 and finite per-joint errors."""
     out, s, _ = outputs
@@ -44,6 +45,7 @@ def test_motion_writes_tables_and_figure_with_finite_errors(outputs):
     assert json.loads((out / "motion" / "summary.json").read_text())["controllers"] == m["controllers"]
 
 
+@pytest.mark.slow  # the quick experiments fixture: 12 s (the CLI test below runs one in the default suite)
 def test_force_reports_overshoot_coupling_and_delay(outputs):
     """The force experiment tracks a sinusoid on f_z without a trip and reports its metrics for both sources."""
     out, s, _ = outputs
@@ -58,6 +60,7 @@ def test_force_reports_overshoot_coupling_and_delay(outputs):
     assert (out / "force" / "fig5_force_tracking.png").stat().st_size > 0
 
 
+@pytest.mark.slow  # the quick experiments fixture: 12 s (the CLI test below runs one in the default suite)
 def test_component_shares_sum_to_one_hundred_percent(outputs):
     """The six paper components' RMS shares sum to 100 % on every joint of every run."""
     out, s, _ = outputs
@@ -67,6 +70,7 @@ def test_component_shares_sum_to_one_hundred_percent(outputs):
     assert (out / "components" / "fig6_components.png").stat().st_size > 0
 
 
+@pytest.mark.slow  # the quick experiments fixture: 12 s (the CLI test below runs one in the default suite)
 def test_estimation_error_is_small_relative_to_the_peak(outputs):
     """The estimated torques of the motion run are finite, with an RMS error below the peak torque per joint."""
     _, s, _ = outputs
@@ -74,6 +78,7 @@ def test_estimation_error_is_small_relative_to_the_peak(outputs):
     assert np.all(np.isfinite(rms)) and np.all(rms < peak)
 
 
+@pytest.mark.slow  # the quick experiments fixture: 12 s (the CLI test below runs one in the default suite)
 def test_identification_table_compares_the_motor_files_with_the_servo(outputs):
     """The estimation experiment tabulates the motor files' k_tau against the simulator's 1/kp: the knee's servo
     (config/servo.toml, kp = 19608 N m/rad) appears, and the default file's k_tau is within 25 % of it."""
@@ -86,6 +91,7 @@ def test_identification_table_compares_the_motor_files_with_the_servo(outputs):
     assert abs(float(knee["k_tau default"]) * 19608.0 - 1.0) < 0.25
 
 
+@pytest.mark.slow  # the quick experiments fixture: 12 s (the CLI test below runs one in the default suite)
 def test_results_document_has_every_section_and_the_paper_tables(outputs):
     """The generated results document covers the four experiments and quotes the paper's Tables 2 and 3."""
     _, _, doc = outputs

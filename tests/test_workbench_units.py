@@ -93,6 +93,7 @@ def test_offset_term_stands_for_the_mean_off_zero(capsys, tmp_path):
     assert out["heldout"]["rms"] < 0.5 * off["heldout"]["rms"]
 
 
+@pytest.mark.slow  # 15 s: the asymmetric loss over the whole library (least squares: the tests above)
 def test_offset_with_the_asymmetric_loss_and_off_on_servo_logs(capsys, tmp_path):
     """The asymmetric loss fits the offset too; a servo log has none by default (its results unchanged)."""
     path = _friction_table(tmp_path / "f.csv")
