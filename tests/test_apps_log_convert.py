@@ -38,9 +38,9 @@ def _q(t: np.ndarray) -> np.ndarray:
     return 0.1 * np.sin(2 * np.pi * np.outer(t, 1 + np.arange(30) / 10))
 
 
-def write_bag(path, kind: str) -> None:
+def write_bag(path, kind: str, quiet=range(0)) -> None:
     """joint_states and joint_commands at 1 kHz, imu at 1 kHz, the right ankle's F/T at 500 Hz; the commands
-    start 5 ms late (those rows are dropped)."""
+    start 5 ms late (those rows are dropped) and skip the ticks in ``quiet``."""
     from rosbags.typesys import Stores, get_typestore
 
     if kind == "ros1":
@@ -79,7 +79,7 @@ def write_bag(path, kind: str) -> None:
             js = T["sensor_msgs/msg/JointState"](header=header(ns), name=names, position=q[k, perm],
                                                  velocity=np.zeros(0), effort=2.0 * q[k, perm])
             writer.write(c_js, ns, serialize(js, "sensor_msgs/msg/JointState"))
-            if k >= 5:
+            if k >= 5 and k not in quiet:
                 cmd = T["sensor_msgs/msg/JointState"](header=header(ns), name=BAG_NAMES, position=q[k] + 0.01,
                                                       velocity=np.zeros(0), effort=np.zeros(0))
                 writer.write(c_cmd, ns, serialize(cmd, "sensor_msgs/msg/JointState"))
@@ -130,6 +130,18 @@ def test_bag_converts_to_a_log_the_workbench_loads(tmp_path, mapping, kind):
     assert any("5 rows" in n for n in r.notes) and any("left_wrist" in n for n in r.notes)
     ds = load_dataset(r.path, joint="RLEG_JOINT3")
     assert ds.n > 300 and np.allclose(ds.target, 0.01, atol=1e-9)  # target = q_des - q
+
+
+def test_a_command_topic_gone_quiet_gives_no_command_not_an_old_one(tmp_path, mapping):
+    """No joint_commands message for 100 ms: q_des is NaN from 1.5 periods after the last one until the next, with
+    a note (the workbench drops those rows); the IMU and the other rows keep their values."""
+    bag = tmp_path / "b"
+    write_bag(bag, "mcap", quiet=range(200, 300))
+    r = convert_bag(bag, mapping, tmp_path / "log.parquet")
+    _, cols = read_log(r.path)
+    qd = cols[f"q_des/{JOINT_NAMES[0]}"]  # row i is tick i + 5
+    assert np.isnan(qd[196:295]).all() and np.isfinite(qd[:195]).all() and np.isfinite(qd[295:]).all()
+    assert any("99 rows without a command" in n for n in r.notes), r.notes
 
 
 def test_cli_log_convert_writes_the_log_and_prints_notes(tmp_path, mapping, capsys):

@@ -138,14 +138,19 @@ def convert_bag(bag: str | Path, mapping_path: str | Path, out: str | Path) -> C
     if mapping.imu is not None:
         gyro, imu_status = sample(mapping.imu.topic, "gyro", 3)
         acc = data[mapping.imu.topic].values["acc"][np.maximum(held[mapping.imu.topic], 0)]
+        imu_status[(imu_status == STATUS_OK) & ~np.isfinite(acc).all(axis=1)] = STATUS_INVALID
     wrenches = np.full((n, nft, 6), np.nan)
     ft_status = np.full((n, nft), STATUS_INVALID, dtype=np.uint8)
     for s, t in mapping.ft.items():
         k = FT_SENSOR_NAMES.index(s)
         wrenches[:, k], ft_status[:, k] = sample(t.topic, "wrench", 6)
-    q_des = None
+    q_des, quiet = None, 0
     if mapping.joint_command is not None:
-        q_des = data[mapping.joint_command.topic].values["position"][np.maximum(held[mapping.joint_command.topic], 0)]
+        idx = np.maximum(held[mapping.joint_command.topic], 0)
+        q_des = data[mapping.joint_command.topic].values["position"][idx].copy()
+        stale = rows - data[mapping.joint_command.topic].stamps[idx] > stale_ns  # the topic went quiet: no command,
+        q_des[stale] = np.nan  # not an old one
+        quiet = int(stale[first:].sum())
     q = js.values["position"]
     enc_status = np.where(np.isfinite(q).all(axis=1), STATUS_OK, STATUS_INVALID).astype(np.uint8)
     status = np.column_stack([enc_status, imu_status, ft_status])  # STATUS_NAMES order
@@ -175,6 +180,9 @@ def convert_bag(bag: str | Path, mapping_path: str | Path, out: str | Path) -> C
     stale = int(np.sum(status[first:] == STATUS_STALE))
     if stale:
         notes.append(f"{stale} sensor readings held longer than {STALE_PERIODS:g} periods (status stale)")
+    if quiet:
+        notes.append(f"{quiet} rows without a command newer than {STALE_PERIODS:g} periods on "
+                     f"{mapping.joint_command.topic}: q_des is NaN there (the workbench drops those rows)")
     return ConvertResult(out, n - first, first, float((rows[-1] - rows[first]) * 1e-9 + period), joints, tuple(notes))
 
 
