@@ -1,4 +1,5 @@
-"""TOML text for the motor file (:mod:`.motor_file`): tomllib reads TOML, tomli-w writes it.
+"""TOML text for the files the project writes (the motor file, :mod:`.motor_file`; the controller's F/T offsets):
+tomllib reads TOML, tomli-w writes it.
 
 Adds what tomli-w leaves to the caller: comment lines at the top, and the refusal of NaN and infinity (TOML
 can write them, a motor parameter must never be one).
@@ -29,4 +30,4 @@ def _check_finite(data: Mapping[str, object], prefix: str) -> None:
         if isinstance(v, Mapping):
             _check_finite(v, name + ".")
         elif isinstance(v, float) and not math.isfinite(v):
-            raise ValueError(f"cannot write non-finite float {name} = {v!r} to the motor-parameter file")
+            raise ValueError(f"cannot write non-finite float {name} = {v!r}: expected a finite number")

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.identification import SHORT_PLAN
 
 from servotau.apps.operator_script import write_sim_setup
 from servotau.cli import main as cli
@@ -22,27 +23,6 @@ from servotau.identification.plan import load_plan
 
 PYTHON = str(REPO_ROOT / ".venv" / "bin" / "python") if (REPO_ROOT / ".venv").exists() else sys.executable
 JOINTS = ["RLEG_JOINT2", "RLEG_JOINT3"]
-PLAN = """[collect]
-joints = ["RLEG_JOINT2", "RLEG_JOINT3"]
-settle = 1.0
-[collect.sweep]
-a = 0.1
-duration = 5.0
-[collect.hold]
-move = 1.0
-hold = 4.0
-[[collect.hold.configurations]]
-RLEG_JOINT2 = -0.453786
-RLEG_JOINT3 = 0.872665
-RLEG_JOINT4 = -0.418879
-[[collect.hold.configurations]]
-RLEG_JOINT2 = -1.0
-RLEG_JOINT3 = 1.6
-RLEG_JOINT4 = -0.6
-[fit]
-loss = "asymmetric"
-w = 100.0
-"""
 
 
 def servotau(*args, timeout=120):
@@ -55,7 +35,7 @@ def cli_run(tmp_path_factory):
     """`identify collect` of a short plan with matching pushes, then `identify fit --json`, as subprocesses."""
     d = tmp_path_factory.mktemp("ident_cli")
     plan_path = d / "plan.toml"
-    plan_path.write_text(PLAN)
+    plan_path.write_text(SHORT_PLAN)
     sim = write_sim_setup(load_plan(plan_path)[0], d)
     log, motors = d / "log.parquet", d / "motors.toml"
     collect = servotau("collect", "--out", log, "--backend", "inprocess", "--plan", plan_path, "--sim-config", sim)

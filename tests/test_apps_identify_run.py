@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import pytest
+from support.identification import SHORT_PLAN
 
 from servotau.actuator import MotorParameters
 from servotau.apps.operator_script import write_sim_setup
@@ -14,28 +15,6 @@ from servotau.config import CONFIG_DIR
 from servotau.identification.plan import load_plan
 
 SERVO = (CONFIG_DIR / "servo.toml").read_text()
-# the short plan of tests/test_apps_identify.py (two joints, two holds)
-PLAN = """[collect]
-joints = ["RLEG_JOINT2", "RLEG_JOINT3"]
-settle = 1.0
-[collect.sweep]
-a = 0.1
-duration = 5.0
-[collect.hold]
-move = 1.0
-hold = 4.0
-[[collect.hold.configurations]]
-RLEG_JOINT2 = -0.453786
-RLEG_JOINT3 = 0.872665
-RLEG_JOINT4 = -0.418879
-[[collect.hold.configurations]]
-RLEG_JOINT2 = -1.0
-RLEG_JOINT3 = 1.6
-RLEG_JOINT4 = -0.6
-[fit]
-loss = "asymmetric"
-w = 100.0
-"""
 
 
 def servo_file(tmp_path: Path, old: str = "", new: str = "") -> Path:
@@ -98,7 +77,7 @@ def test_run_writes_the_controllers_motor_file_with_each_joints_choice(tmp_path,
     """The whole chain on a short plan (two joints) with a servo of other gains: the motor file loads, the
     controller's check passes, and the report gives each joint's choice and reason."""
     plan = tmp_path / "plan.toml"
-    plan.write_text(PLAN)
+    plan.write_text(SHORT_PLAN)
     sim = write_sim_setup(load_plan(plan)[0], tmp_path)
     servo = servo_file(tmp_path, "kp = 19608.0", "kp = 14000.0")
     out = tmp_path / "motors.toml"

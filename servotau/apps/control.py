@@ -134,12 +134,14 @@ class SaveOffsets(LoopHook):
         self.path, self.estimator, self.sensor_names = path, estimator, tuple(sensor_names)
 
     def settled(self, tick: Tick) -> None:
-        lines = ["# F/T offsets [N, N m] calibrated in the settle phase of servotau control "
-                 f"(robot time {tick.frame.time:.3f} s); servotau control --ft-offsets reads them"]
-        for name, row in zip(self.sensor_names, self.estimator.ft_offsets, strict=True):
-            lines.append(f"{name} = [{', '.join(repr(float(v)) for v in row)}]")
+        from servotau.actuator.toml_writer import dumps
+
+        offsets = {name: [float(v) for v in row]
+                   for name, row in zip(self.sensor_names, self.estimator.ft_offsets, strict=True)}
+        header = [f"F/T offsets [N, N m] calibrated in the settle phase of servotau control (robot time "
+                  f"{tick.frame.time:.3f} s); servotau control --ft-offsets reads them"]
         with open(self.path, "w", encoding="utf-8") as f:
-            f.write("\n".join(lines) + "\n")
+            f.write(dumps(offsets, header))
 
 
 class _ModeOverride(Task):

@@ -11,7 +11,30 @@ from servotau.identification.collect import HoldPlan, SweepPlan
 from servotau.identification.plan import CollectionPlan, load_plan
 from servotau.identification.session import run_collection
 
-__all__ = ["collect_short_log"]
+__all__ = ["SHORT_PLAN", "collect_short_log"]
+
+# A short collection plan (two joints, two holds) for the `servotau identify` commands
+SHORT_PLAN = """[collect]
+joints = ["RLEG_JOINT2", "RLEG_JOINT3"]
+settle = 1.0
+[collect.sweep]
+a = 0.1
+duration = 5.0
+[collect.hold]
+move = 1.0
+hold = 4.0
+[[collect.hold.configurations]]
+RLEG_JOINT2 = -0.453786
+RLEG_JOINT3 = 0.872665
+RLEG_JOINT4 = -0.418879
+[[collect.hold.configurations]]
+RLEG_JOINT2 = -1.0
+RLEG_JOINT3 = 1.6
+RLEG_JOINT4 = -0.6
+[fit]
+loss = "asymmetric"
+w = 100.0
+"""
 
 
 def collect_short_log(folder: Path, joints: tuple[str, ...] = ("RLEG_JOINT3",), sweep: float = 4.0,
