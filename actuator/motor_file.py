@@ -41,7 +41,7 @@ or of another target, naming the file, the joint and the key.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -95,9 +95,11 @@ class MotorParameters(Mapping[str, MotorModel]):
     def __len__(self) -> int:
         return len(self.models)
 
-    def save_toml(self, path: str | Path) -> Path:
-        """Write the file (format in the module docstring); return its path."""
+    def save_toml(self, path: str | Path, notes: Sequence[str] = ()) -> Path:
+        """Write the file (format in the module docstring), ``notes`` as comment lines at its top; return its
+        path."""
         header = [
+            *notes,
             "servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
             "Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
         ]

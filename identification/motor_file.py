@@ -204,11 +204,8 @@ def build_motor_file(log: str | Path, joints: Sequence[str] | None = None, *, ca
 
 def write_motor_file(report: MotorFileReport, path: str | Path) -> Path:
     """Write the motor file with a header giving each joint's choice and its reason."""
-    p = report.params.save_toml(path)
-    header = [f"# Written by `servotau identify run` from {report.log}: the paper's model (asymmetric, w = {W:g}),",
-              "# the model workbench's effects that lower the held-out error, the dead band measured on the holds",
-              "# when it lowers the held-out error at rest (identification/motor_file.py). Per joint:"]
-    header += [f"#   {j}: {c.reason()}" for j, c in report.choices.items()]
-    p.write_text("\n".join(header) + "\n" + p.read_text(encoding="utf-8"), encoding="utf-8")
-    return p
+    notes = [f"Written by `servotau identify run` from {report.log}: the paper's model (asymmetric, w = {W:g}),",
+             "the model workbench's effects that lower the held-out error, the dead band measured on the holds",
+             "when it lowers the held-out error at rest (identification/motor_file.py). Per joint:"]
+    return report.params.save_toml(path, notes + [f"  {j}: {c.reason()}" for j, c in report.choices.items()])
 

@@ -51,6 +51,14 @@ def test_round_trip(tmp_path):
     assert list(back) == ["RLEG_JOINT3", "joint with space"] and len(back) == 2
 
 
+def test_notes_head_the_file_as_comments_and_change_nothing_read(tmp_path):
+    """save_toml(notes): the notes are the file's first comment lines; the parameters read back are the same."""
+    p = params()
+    text = p.save_toml(tmp_path / "m.toml", ["chosen by a test", "  RLEG_JOINT3: kept"]).read_text()
+    assert text.startswith("# chosen by a test\n#   RLEG_JOINT3: kept\n# servotau motor parameters")
+    assert MotorParameters.load_toml(tmp_path / "m.toml") == p
+
+
 def test_from_fit_and_predict(tmp_path):
     """A model built from a fit carries its coefficients, loss and metrics, and predicts like the fit."""
     d = make_synthetic(500, seed=0)
