@@ -247,7 +247,8 @@ class ControlLoop:
                     settled = True
                     if state == "settling":
                         state = "running"
-                    if self.mode != Mode.POSITION and not manager.tripped:
+                    if self.mode != Mode.POSITION and not manager.tripped and stopping is None \
+                            and not self._stop_requested:  # a stop asked while settling: position mode stays
                         manager.request_mode(self.mode)
                     for h in hooks:
                         h.settled(tick)
