@@ -138,15 +138,40 @@ def test_beyond_a_joint_limit_is_refused_naming_phase_joint_and_limit(tmp_path, 
 
 def test_too_fast_is_refused_naming_the_velocity_limit(tmp_path, robot):
     task = FileTask(load_task(write(tmp_path, SINE.format(amplitude=0.5, frequency=3.0))))
-    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 9.42 rad/s, above 4.70 rad/s = '
-                                             r"\(1 - 0.06\) x the velocity limit 5 rad/s"):
+    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 9.42 rad/s.*, above 4.70 '
+                                             r"rad/s = \(1 - 0.06\) x the velocity limit 5 rad/s"):
         TaskRunner(task, robot[0]).prepare(robot[1])
 
 
 def test_a_swing_too_short_is_refused_with_the_duration_it_needs(robot):
-    with pytest.raises(InfeasibleTask, match=r'swing.toml: phase "swing": joint RLEG_JOINT3 moves at 6.42 rad/s, '
-                                             r".*expected a duration of at least 1.64 s"):
+    """The duration the refusal asks for is accepted (the speed the estimator reads, with the margin)."""
+    with pytest.raises(InfeasibleTask, match=r'swing.toml: phase "swing": joint RLEG_JOINT3 moves at 6.42 rad/s '
+                                             r".*expected a duration of at least (\d\.\d\d) s") as refused:
         TaskRunner(FileTask.load("swing", duration=1.2), robot[0]).prepare(robot[1])
+    need = float(str(refused.value).rsplit("at least ", 1)[1].split(" s")[0])
+    assert 1.6 < need < 1.7
+    TaskRunner(FileTask.load("swing", duration=need), robot[0]).prepare(robot[1])
+
+
+def test_the_speed_the_estimator_reads_and_the_command_error_are_predicted_before_anything_moves(tmp_path, robot):
+    """A knee sinusoid at 7 Hz whose reference stays under the velocity limit is refused on the speed its encoder
+    filter will read (it tripped joint_velocity when run, CHANGELOG); with a command-error limit of 0.03 rad the
+    2 s swing (0.0247 rad predicted on the knee) is refused naming the joint, the value and the limit."""
+    from servotau.config import CONFIG_DIR
+
+    fast = SINE.format(amplitude=0.1, frequency=7.0).replace("frequency = 7.0", "frequency = 7.0\n    ramp = 0.5")
+    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 4.60 rad/s \(the estimator '
+                                             r"reads 6.\d\d rad/s: the servo's response through its filter\), above "
+                                             r"4.70 rad/s"):
+        TaskRunner(FileTask(load_task(write(tmp_path, fast))), robot[0]).prepare(robot[1])
+    control = (CONFIG_DIR / "control.toml").read_text().replace("max_command_error = 0.08", "max_command_error = 0.03")
+    control = control.replace('motors = "motors/', f'motors = "{CONFIG_DIR}/motors/')
+    (tmp_path / "control.toml").write_text(control)
+    runner = TaskRunner(FileTask.load("swing", duration=2.0), robot[0], control=tmp_path / "control.toml")
+    with pytest.raises(InfeasibleTask, match=r'phase "swing": joint RLEG_JOINT3 needs a command error \|q_des - q\| '
+                                             r"of 0.02\d rad at t = .*above 0.022 rad = \(1 - 0.25\) x the safety's "
+                                             r"max_command_error 0.03 rad"):
+        runner.prepare(robot[1])
 
 
 def test_a_jerk_limited_phase_shorter_than_its_trajectory_is_refused(tmp_path, robot):

@@ -14,8 +14,8 @@ response that overshoots when the servo has little damping. The safety's ``joint
 checks read the estimator's outputs, not the motion: its encoder filter (last-sample Savitzky-Golay, the loop's
 variant) amplifies a joint's speed above a few Hz (window 80, order 3: x 1.15 at 5 Hz, x 1.41 at 7 Hz). So the
 predicted speed ``dq_hat`` is that filter applied to the servo's response and to the reference itself (the larger:
-the torque law tracks the reference), and the predicted torque the dynamics along those filtered signals and along
-the reference (the larger).
+the torque law tracks the reference), and the predicted torque the reference's plus ``M_jj`` times the filtered
+acceleration's excess over the reference's (the larger of the two).
 
 :func:`~.build.check_feasible` refuses a phase whose predicted ``|dq_hat|`` exceeds ``(1 - VELOCITY_MARGIN)
 max_velocity``; :func:`check_lag` one whose ``|tau|`` exceeds ``(1 - TORQUE_MARGIN) max_torque`` or ``|dq_err|``
@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
-from scipy.signal import cont2discrete, lfilter, savgol_coeffs
+from scipy.signal import lfilter, savgol_coeffs
 
 from servotau.actuator import MotorModel
 from servotau.hal.types import RobotInfo
@@ -97,10 +97,7 @@ class LagModel:
         if isinstance(reference, Hold) or length <= 0.0:
             length = 0.0
         ts = np.append(np.arange(0.0, length, STEP), length) if length > 0 else np.array([0.0])
-        pts = [reference.sample(float(t)) for t in ts]
-        q = np.array([p.q for p in pts])
-        dq = np.array([p.dq for p in pts])
-        ddq = np.array([p.ddq for p in pts])
+        q, dq, ddq = reference.samples(ts)
         tau, m_jj, buf = np.zeros_like(q), np.zeros(n), np.zeros(n)
         for k in range(len(ts)):
             dyn.set_state(q[k], dq[k])
@@ -115,34 +112,36 @@ class LagModel:
         worst = np.abs(err).argmax(axis=0)
         velocity, torque = np.abs(dq).max(axis=0), np.abs(tau).max(axis=0)
         if length > 0:
-            v_hat, tau_hat = self._estimated(ts, q, dq, err, m_jj)
+            v_hat, tau_hat = self._estimated(ts, q, dq, ddq, tau, err, m_jj)
             np.maximum(velocity, v_hat, out=velocity)
             np.maximum(torque, tau_hat, out=torque)
         return LagPrediction(np.abs(err).max(axis=0), ts[worst], velocity, torque)
 
-    def _estimated(self, ts, q, dq, err, m_jj) -> tuple[np.ndarray, np.ndarray]:
+    def _estimated(self, ts, q, dq, ddq, tau, err, m_jj) -> tuple[np.ndarray, np.ndarray]:
         """The largest estimated speed and torque (n,): the encoder filter on the servo's response and on the
-        reference, at the control period (module doc)."""
+        reference, at the control period (module doc); the torque ``tau + M_jj (ddq_hat - ddq_d)`` per joint."""
         dt, idx, w = self.period, self.index, self.window
         fine = np.arange(0.0, ts[-1], dt)
         q_ref = CubicHermiteSpline(ts, q, dq, axis=0)(fine)
         q_servo = q_ref.copy()
-        if idx.size:  # k_tau M x'' + k_v x' + x = -err, semi-implicit Euler as a second-order IIR per joint
+        if idx.size:
             e = np.column_stack([np.interp(fine, ts, err[:, i]) for i in idx])
-            for c, i in enumerate(idx):  # x / e = -1 / (k_tau M_jj s^2 + k_v s + 1), bilinear (keeps the damping)
-                b, a, _ = cont2discrete(([-1.0], [self.k_tau[c] * m_jj[i], self.k_v[c], 1.0]), dt, method="bilinear")
-                q_servo[:, i] += lfilter(np.ravel(b), a, e[:, c])
-        v_hat, tau_hat, buf = np.zeros(self.info.nq), np.zeros(self.info.nq), np.zeros(self.info.nq)
-        stride = max(1, int(round(STEP / dt)))
+            g = 2.0 / dt
+            for c, i in enumerate(idx):  # x / e = -1 / (A s^2 + B s + 1), bilinear s = g (z - 1) / (z + 1)
+                A, B = self.k_tau[c] * m_jj[i], self.k_v[c]
+                den = [A * g * g + B * g + 1.0, 2.0 - 2.0 * A * g * g, A * g * g - B * g + 1.0]
+                q_servo[:, i] += lfilter([-1.0, -2.0, -1.0], den, e[:, c])
+        tau_ref = np.column_stack([np.interp(fine, ts, col) for col in tau.T])
+        ddq_ref = np.column_stack([np.interp(fine, ts, col) for col in ddq.T])
+        v_hat, tau_hat = np.zeros(self.info.nq), np.zeros(self.info.nq)
         for qq in (q_servo, q_ref):
-            padded = np.vstack([np.repeat(qq[:1], w, axis=0), qq])  # at rest before the phase
-            vel = lfilter(self.d1, [1.0], padded, axis=0)[w:]
+            moving = np.flatnonzero(np.ptp(qq, axis=0) > 0.0)  # the filters of joints at rest read 0
+            padded = np.vstack([np.repeat(qq[:1, moving], w, axis=0), qq[:, moving]])  # at rest before the phase
+            vel = np.abs(lfilter(self.d1, [1.0], padded, axis=0)[w:])
             acc = lfilter(self.d2, [1.0], padded, axis=0)[w:]
-            np.maximum(v_hat, np.abs(vel).max(axis=0), out=v_hat)
-            for k in range(0, len(fine), stride):
-                self.dynamics.set_state(qq[k], vel[k])
-                self.dynamics.inverse_dynamics(acc[k], buf)
-                np.maximum(tau_hat, np.abs(buf), out=tau_hat)
+            v_hat[moving] = np.maximum(v_hat[moving], vel.max(axis=0, initial=0.0))
+            est = np.abs(tau_ref[:, moving] + m_jj[moving] * (acc - ddq_ref[:, moving])).max(axis=0, initial=0.0)
+            tau_hat[moving] = np.maximum(tau_hat[moving], est)
         return v_hat, tau_hat
 
 
