@@ -139,7 +139,7 @@ def test_beyond_a_joint_limit_is_refused_naming_phase_joint_and_limit(tmp_path, 
 def test_too_fast_is_refused_naming_the_velocity_limit(tmp_path, robot):
     task = FileTask(load_task(write(tmp_path, SINE.format(amplitude=0.5, frequency=3.0))))
     with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 9.42 rad/s.*, above 4.70 '
-                                             r"rad/s = \(1 - 0.06\) x the velocity limit 5 rad/s"):
+                                             r"rad/s = \(1 - 0.06, position mode\) x the velocity limit 5 rad/s"):
         TaskRunner(task, robot[0]).prepare(robot[1])
 
 

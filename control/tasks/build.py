@@ -157,7 +157,7 @@ class FileTask(Task):
 def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits: SafetyLimits,
                    lag: LagModel | None = None) -> None:
     """Refuse phases beyond the joint limits (``q_min + margin``, ``q_max - margin``), shorter than their
-    trajectory, faster than ``(1 - VELOCITY_MARGIN) limits.max_velocity`` (with ``lag``: the speed the estimator
+    trajectory, faster than ``(1 - VELOCITY_MARGIN[mode]) limits.max_velocity`` (with ``lag``: the speed the estimator
     will read, the servo's response through its filter) or (with ``lag``) needing a torque or a command error beyond
     the safety's (:mod:`.lag`).
 
@@ -202,7 +202,8 @@ def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits:
                                      f"{'+' if what == 'lower' else '-'} joint_limit_margin {margin:g} rad)")
         pred = lag.predict(ref, p.length) if lag is not None and p.force is None else None
         v_hat = v if pred is None else np.maximum(v, pred.velocity)
-        v_lim = (1.0 - VELOCITY_MARGIN) * limits.max_velocity
+        v_margin = VELOCITY_MARGIN[p.mode]
+        v_lim = (1.0 - v_margin) * limits.max_velocity
         over = np.flatnonzero(v_hat > v_lim)
         if over.size:
             i = int(over[np.argmax(v_hat[over] / v_lim[over])])
@@ -213,8 +214,8 @@ def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits:
             read = f" (the estimator reads {v_hat[i]:.2f} rad/s: the servo's response through its filter)" \
                 if v_hat[i] > v[i] + 0.005 else ""
             raise InfeasibleTask(f"{where}: joint {names[i]} moves at {v[i]:.2f} rad/s{read}, above {v_lim[i]:.2f} "
-                                 f"rad/s = (1 - {VELOCITY_MARGIN:g}) x the velocity limit {limits.max_velocity[i]:g} "
-                                 f"rad/s (control.toml [safety] max_velocity){need}")
+                                 f"rad/s = (1 - {v_margin:g}, {p.mode} mode) x the velocity limit "
+                                 f"{limits.max_velocity[i]:g} rad/s (control.toml [safety] max_velocity){need}")
         refusal = check_lag(where, pred, info, limits) if pred is not None else None
         if refusal is not None:
             raise InfeasibleTask(refusal)
