@@ -46,11 +46,12 @@ from .references import Hold
 
 STEP = 0.01  # [s] sampling of a reference for the dynamics (the filters run at the control period)
 VELOCITY_MARGIN = {"position": 0.06, "torque": 0.12}  # [-] share of max_velocity kept, per mode, for what the
-# prediction leaves out: in position mode noise and the model's error (measured within -1.2..+1.5 % of the
-# prediction), in torque mode the law's own overshoot of its reference (2-6 % on the swing, 12.5 % on a 4 Hz knee wave)
+# prediction leaves out: in position mode noise and the model's error (measured within -1.6..+1.5 % of the
+# prediction), in torque mode the law's own overshoot of its reference (measured up to 12.5 %). It does not cover a
+# torque loop that resonates with its reference (hip yaw and roll excited at 4 Hz: CHANGELOG).
 TORQUE_MARGIN = 0.1  # [-] share of max_torque kept for the estimator's torque beyond the prediction
 COMMAND_MARGIN = 0.25  # [-] share of max_command_error kept for what the model does not predict (the feedback,
-# the estimator's noise, the model's own error: on the swing the measured command error was 1.05-1.17 x the predicted)
+# the estimator's noise, the model's own error: the measured command error was 1.05-1.21 x the predicted)
 
 
 @dataclass(frozen=True)

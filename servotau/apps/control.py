@@ -186,7 +186,9 @@ def register(sub) -> None:
                    help="the mode of every phase (default: each phase's own)")
     p.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                    help="[s] the length of the task's duration_phase (swing: the swing, default 3 s; a duration too "
-                        "short for the controller's velocity limit is refused)")
+                        "short for the safety's limits, the speed the estimator will read with a margin, the torque "
+                        "or the command error, is refused before anything moves with the duration it needs: "
+                        "position mode at least 1.65 s, torque mode 1.76 s)")
     p.add_argument("--ft-offsets", default=None, metavar="FILE",
                    help='TOML of F/T offsets [N, N m], sensor = [fx, fy, fz, tx, ty, tz], for tasks with '
                         'settle.ft_offsets = "external" (measured with the feet free)')
