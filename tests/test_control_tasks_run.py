@@ -286,19 +286,19 @@ def test_after_a_trip_and_a_reset_the_operator_starts_a_task_that_drives_again(t
 TWO_GAINS = """
 name = "two_gains"
 [settle]
-duration = 0.2
+duration = 0.15
 [[phases]]
 name = "stiff"
 mode = "torque"
 k6 = 1.0
-duration = 0.3
+duration = 0.2
 [phases.reference]
 type = "hold"
 [[phases]]
 name = "soft"
 mode = "torque"
 k6 = 0.5
-duration = 0.3
+duration = 0.2
 [phases.reference]
 type = "hold"
 """
@@ -316,7 +316,7 @@ def test_torque_phases_with_their_own_gains_run_and_the_command_stays_continuous
         runner = TaskRunner(FileTask.load(str(tmp_path / "two.toml")), backend.info)
         runner_box.append(runner)
         record = Record(runner)
-        loop = ControlLoop(backend, runner.manager(), hooks=[runner, record, probe], settle=0.2)
+        loop = ControlLoop(backend, runner.manager(), hooks=[runner, record, probe], settle=0.15)
         result = runner.run(loop)
     finally:
         backend.close()
