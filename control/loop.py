@@ -318,9 +318,10 @@ class ControlLoop:
                     operator.publish(state, manager.report.message if manager.tripped else None, detail)
                     for d, request in [x for x in deferred if x[0].done]:
                         deferred.remove((d, request))
-                        if d.refusal is None and state == "holding":  # after a reset: the new task drives again
+                        refusal = "the run is stopping" if state == "stopping" and d.refusal is None else d.refusal
+                        if refusal is None and state == "holding":  # after a reset: the new task drives again
                             held, state = None, "running"
-                        operator.answer(request, d.refusal is None, state, d.refusal)
+                        operator.answer(request, refusal is None, state, refusal)
                     pending = operator.take()
                     if pending is not None:
                         if pending.action == "release":

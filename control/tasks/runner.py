@@ -297,6 +297,10 @@ class TaskRunner(LoopHook):
     def _adopt(self, tick: Tick) -> None:
         """The worker is done (loop thread): take the built task, build it again on a new rest posture, or refuse."""
         job = self._job
+        if self.manager().tripped:  # tripped while it was being built: the hold stays until an operator acts
+            self._job = None
+            job.answer.finish(f"start {job.name}: a safety trip latched meanwhile: reset first")
+            return
         try:
             plan = job.result.result()
         except ServotauError as exc:
