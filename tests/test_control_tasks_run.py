@@ -233,6 +233,41 @@ def test_the_operator_starts_another_task_from_rest(tmp_path):
     assert len(builders) == 3 and loop_thread[0] not in builders  # 2 reads, 1 build (the bad task is not read)
 
 
+REST = """
+name = "rest"
+[[phases]]
+name = "rest"
+duration = 0.1
+[phases.reference]
+type = "hold"
+"""
+
+
+def test_a_start_while_the_reference_moves_is_built_again_where_it_comes_to_rest(tmp_path):
+    """``start`` during a wave: built on where the reference would rest at the request, then (the reference having
+    moved on) built again on where the stop begun then rests; the new task runs from there, the command without a
+    jump."""
+    (tmp_path / "wave.toml").write_text(WAVE.replace("duration = 0.3", "duration = 2.0"))
+    (tmp_path / "rest.toml").write_text(REST)
+    channel = OperatorChannel()
+    answers = {}
+
+    def at(tick):
+        if tick.t >= 0.12 and "start" not in answers:
+            answers["start"] = threading.Thread(
+                target=lambda: answers.setdefault("ok", channel.request("start", 30, task=str(tmp_path / "rest.toml"))))
+            answers["start"].start()
+
+    result, runner, record, _ = run(FileTask.load(str(tmp_path / "wave.toml")), operator=channel,
+                                    hooks=[Record(at=at)])
+    answers["start"].join(10)
+    assert answers["ok"].ok, answers["ok"]
+    assert result.end == "completed" and result.tripped is None and runner.task.name == "rest"
+    assert record.phases[-1] == "rest" and "stop" in record.phases
+    steps = np.abs(np.diff(np.array(record.q_des), axis=0)).max(axis=1)
+    assert steps.max() < 2e-3, steps.max()  # [rad] per tick: the wave's own speed, no jump at the start
+
+
 class RobotOff(Counting):
     """Reports its servos cut (a robot-side trip) for robot times in [0.3, 0.4) s."""
 
