@@ -119,6 +119,17 @@ class InverseDynamics:
         frames = dict(zip(info.ft_sensor_names, info.ft_sensor_frames, strict=True))
         return cls(dyn, config.joint_vector("k_s"), config.joint_vector("k_d"), config.contacts, config.force, frames)
 
+    def set_gains(self, k_s: np.ndarray, k_d: np.ndarray) -> None:
+        """Write the stiffness ``k_s`` [N m/rad] and damping ``k_d`` [N m s/rad] (n,) into the law's own arrays
+        (in place: holders of :attr:`k_s` and :attr:`k_d` see the new values).
+
+        Raises:
+            ControlError: Not n finite numbers >= 0 (naming the gain).
+        """
+        n = self.dyn.n
+        self.k_s[:] = _gain("k_s", k_s, n)
+        self.k_d[:] = _gain("k_d", k_d, n)
+
     @property
     def contacts(self) -> tuple[str, ...]:
         return tuple(c.sensor for c in self._contacts)

@@ -26,12 +26,24 @@ terms always read the estimates.
 
 ``tau_d`` is eq. 12 plus ``tau_iq``, the integral of the position error while the reference is at rest, kept out
 of the force task's directions (control/position_integral.py; 0 unless a joint has ``k_iq`` > 0).
+
+Gains change during a run (a task's phases, :meth:`TorqueControlLaw.set_gains`) in place, in the law's own arrays
+(:class:`ControlTerms` shares them by identity: nothing is reallocated). In torque mode a change is ramped over
+``ramp`` [s] (half-cosine from the old to the new ``K_p``, ``K_s``, ``K_d``), so the command has no step at a phase
+boundary: each tick it moves by what the gains of that tick imply from the same state. Entering torque mode
+(:meth:`TorqueControlLaw.reset`) completes a ramp at once (the manager's bumpless switch fades the whole command
+then). The integrals keep their state across a change: the torque integral (``K_i`` is not a phase gain) and the
+position integral ``i_q`` [rad], whose torque ``K_s i_q`` follows the stiffness as it ramps.
 """
+
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from servotau.errors import ControlError
 from servotau.hal.types import RobotInfo
 
 from .config import ControlConfig
@@ -59,7 +71,72 @@ class TorqueControlLaw:
         self._ff_velocity = config.velocity_feedforward
         self._kt_kp = tc.k_tau * tc.k_p
         self._kt_1kp = tc.k_tau * (1.0 + tc.k_p)
-        self._tmp = np.zeros(len(config.joint_names))
+        n = len(config.joint_names)
+        self._tmp = np.zeros(n)
+        self._ramp_from = np.zeros((3, n))  # (k_p, k_s, k_d) at a ramp's start
+        self._ramp_to = np.zeros((3, n))  # ... and at its end
+        self._ramp_ticks = 0  # ticks of the ramp in progress
+        self._ramp_k = 0  # ticks done (== _ramp_ticks: no ramp)
+        self._period = float(period)
+
+    @property
+    def gains(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The gains in use ``(k_p [-], k_s [N m/rad], k_d [N m s/rad])``, each (n,) (the law's arrays, read-only
+        views)."""
+        out = []
+        for a in (self.torque.k_p, self.inverse_dynamics.k_s, self.inverse_dynamics.k_d):
+            v = a.view()
+            v.flags.writeable = False
+            out.append(v)
+        return tuple(out)
+
+    def set_gains(self, k_p, k_s, k_d, ramp: float = 0.0) -> None:
+        """Change ``K_p`` [-], ``K_s`` [N m/rad] and ``K_d`` [N m s/rad] (each (n,), 0 on position-controlled joints)
+        in place, from the next :meth:`update` on, ramped over ``ramp`` [s] (module doc; 0: at once).
+
+        Raises:
+            ControlError: A gain is not a finite number >= 0, or nonzero on a position-controlled joint (naming the
+                joint and the gain); nothing is changed then.
+        """
+        names, mask, n = self.config.joint_names, self.torque.mask, len(self.config.joint_names)
+        target = np.empty((3, n))
+        for row, (name, value, unit) in enumerate((("k_p", k_p, "-"), ("k_s", k_s, "N m/rad"),
+                                                    ("k_d", k_d, "N m s/rad"))):
+            arr = np.asarray(value, dtype=float)
+            if arr.shape != (n,):
+                raise ControlError(f"set_gains: {name} has shape {arr.shape}: expected ({n},) [{unit}]")
+            bad = np.flatnonzero(~np.isfinite(arr) | (arr < 0) | (~mask & (arr != 0)))
+            if bad.size:
+                i = int(bad[0])
+                expected = "0 (a position-controlled joint)" if not mask[i] else f"a finite number >= 0 [{unit}]"
+                raise ControlError(f"set_gains: joint {names[i]}: {name} = {float(arr[i])!r}: expected {expected}")
+            target[row] = arr
+        if not (ramp >= 0 and np.isfinite(ramp)):
+            raise ControlError(f"set_gains: ramp = {ramp!r}: expected a finite number >= 0 [s]")
+        np.copyto(self._ramp_to, target)
+        self._ramp_from[0], self._ramp_from[1], self._ramp_from[2] = self.gains
+        self._ramp_ticks, self._ramp_k = int(round(ramp / self._period)), 0
+        if self._ramp_ticks == 0:
+            self._apply(self._ramp_to)
+
+    def _apply(self, g: np.ndarray) -> None:
+        """Write gains ``g`` = (k_p, k_s, k_d) rows into every array that depends on them (no allocation)."""
+        tc, idc = self.torque, self.inverse_dynamics
+        tc.set_k_p(g[0])
+        idc.set_gains(g[1], g[2])
+        np.copyto(self.position_integral.k_s, g[1])
+        np.multiply(tc.k_tau, tc.k_p, out=self._kt_kp)
+        np.add(tc.k_p, 1.0, out=self._kt_1kp)
+        self._kt_1kp *= tc.k_tau
+        np.multiply(self._kt_1kp, idc.k_s, out=self.k6)
+        np.multiply(self._kt_1kp, idc.k_d, out=self.k7)
+
+    def _ramp_step(self) -> None:
+        self._ramp_k += 1
+        w = 0.5 * (1.0 - math.cos(math.pi * self._ramp_k / self._ramp_ticks))  # 0 -> 1
+        g = self._ramp_from + w * (self._ramp_to - self._ramp_from) if self._ramp_k < self._ramp_ticks \
+            else self._ramp_to
+        self._apply(g)
 
     def make_terms(self) -> ControlTerms:
         """The outputs holder this law writes into (it shares the law's own buffers: no copy per tick)."""
@@ -69,7 +146,10 @@ class TorqueControlLaw:
         return ControlTerms(len(self.config.joint_names), shared)
 
     def reset(self) -> None:
-        """Empty the torque and position integrals (on entering torque mode)."""
+        """Empty the torque and position integrals and complete a gain ramp (on entering torque mode)."""
+        if self._ramp_k < self._ramp_ticks:
+            self._ramp_k = self._ramp_ticks
+            self._apply(self._ramp_to)
         self.torque.reset()
         self.position_integral.reset()
 
@@ -77,6 +157,8 @@ class TorqueControlLaw:
                base: BaseState | None = None) -> np.ndarray:
         """Compute the law and write every torque component into ``terms`` (from :meth:`make_terms`); return
         ``dq_err`` (n,) [rad]."""
+        if self._ramp_k < self._ramp_ticks:
+            self._ramp_step()
         idc, tc, t, tmp = self.inverse_dynamics, self.torque, terms, self._tmp
         tau_d = idc.update(q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, wrenches, base)
         pint = self.position_integral

@@ -30,7 +30,8 @@ Phases:
   then keeps; ``release`` ends the run. ``hold_timeout`` [s] of robot time without a release ends it too
   (default 0: the loop stops on the tripping tick, after writing the hold).
 - operator: ``position``/``torque`` request that mode (refused while a trip is latched); other actions go to
-  ``actions`` (e.g. a task runner's ``start``).
+  ``actions`` (e.g. a task runner's ``start``). An action whose work must not run on the loop's thread (reading and
+  building a task) returns a :class:`Deferred`; the loop answers the operator on the tick it is finished.
 
 Time is the robot's: a tick's ``t`` and the phases count robot ticks from the first frame (``frame.seq``), so
 frames skipped by a late controller shorten neither the settle phase nor the run, and the estimator fills
@@ -136,8 +137,25 @@ class LoopResult:
         return self.robot_ticks * self.period
 
 
+class Deferred:
+    """The answer to an operator action that finishes later, off the loop's thread (e.g. a task built by a worker):
+    the action's handler returns one and calls :meth:`finish` once done (on the loop's thread, from a hook); the loop
+    answers the operator at the end of that tick."""
+
+    __slots__ = ("done", "refusal")
+
+    def __init__(self):
+        self.done = False
+        self.refusal: str | None = None
+
+    def finish(self, refusal: str | None = None) -> None:
+        """Done: None (the action applies), or why it is refused."""
+        self.refusal, self.done = refusal, True
+
+
 Reference = Callable[[Tick], TrajectoryPoint | None]
-Action = Callable[[dict, Tick], str | None]  # an operator action's handler: None (done) or why it is refused
+Action = Callable[[dict, Tick], str | Deferred | None]  # an operator action's handler: None (done), why it is
+# refused, or a Deferred answer
 
 
 class ControlLoop:
@@ -227,6 +245,7 @@ class ControlLoop:
         if operator is not None:
             operator.publish(state)
         t_wall = time.perf_counter()
+        deferred: list = []  # (Deferred, request) of actions still being prepared off this thread
         k, i = -1, 0
         try:
             while True:
@@ -247,7 +266,8 @@ class ControlLoop:
                     settled = True
                     if state == "settling":
                         state = "running"
-                    if self.mode != Mode.POSITION and not manager.tripped:
+                    if self.mode != Mode.POSITION and not manager.tripped and stopping is None \
+                            and not self._stop_requested:  # a stop asked while settling: position mode stays
                         manager.request_mode(self.mode)
                     for h in hooks:
                         h.settled(tick)
@@ -296,6 +316,12 @@ class ControlLoop:
                     if k % DETAIL_TICKS == 0:  # status's detail, refreshed every DETAIL_TICKS ticks
                         detail = {"time": float(frame.time), "mode": manager.mode.value, **self.describe()}
                     operator.publish(state, manager.report.message if manager.tripped else None, detail)
+                    for d, request in [x for x in deferred if x[0].done]:
+                        deferred.remove((d, request))
+                        refusal = "the run is stopping" if state == "stopping" and d.refusal is None else d.refusal
+                        if refusal is None and state == "holding":  # after a reset: the new task drives again
+                            held, state = None, "running"
+                        operator.answer(request, refusal is None, state, refusal)
                     pending = operator.take()
                     if pending is not None:
                         if pending.action == "release":
@@ -324,9 +350,12 @@ class ControlLoop:
                         elif pending.action in actions:
                             refusal = "the run is stopping" if state == "stopping" else actions[pending.action](
                                 pending.args, tick)
-                            if refusal is None and state == "holding":  # after a reset: the new task drives again
-                                held, state = None, "running"
-                            operator.answer(pending, refusal is None, state, refusal)
+                            if isinstance(refusal, Deferred):
+                                deferred.append((refusal, pending))
+                            else:
+                                if refusal is None and state == "holding":  # after a reset: the new task drives
+                                    held, state = None, "running"
+                                operator.answer(pending, refusal is None, state, refusal)
                         elif pending.action != "reset":
                             operator.answer(pending, False, state, f"{pending.action}: not served by this loop")
                         elif state == "tripped":  # reset
@@ -354,9 +383,11 @@ class ControlLoop:
                     break
                 frame = backend.read()
         finally:
-            if operator is not None:
-                operator.close({"completed": "done", "stopped": "stopped"}.get(end, "released"))
             self.state = {"completed": "done", "stopped": "stopped"}.get(end, "released")
+            for _, request in deferred:
+                operator.answer(request, False, self.state, f"the control loop has ended ({self.state})")
+            if operator is not None:
+                operator.close(self.state)
         return LoopResult(ticks=k + 1, period=dt, wall_seconds=time.perf_counter() - t_wall, tripped=first_trip,
                           robot_ticks=i + 1, end=end, trips=trips, resets=resets, gaps=estimator.gaps,
                           missing_frames=estimator.missing_frames, longest_gap=estimator.longest_gap)

@@ -107,6 +107,23 @@ class JointTorqueController:
         self.integral.fill(0.0)
         self.integral_term.fill(0.0)
 
+    def set_k_p(self, k_p: np.ndarray) -> None:
+        """Write the torque gain ``k_p`` [-] (n,) in place (0 on joints without gains); the integral and its gain
+        ``k_i`` are kept.
+
+        Raises:
+            ControlError: Not n finite numbers >= 0, or a nonzero gain on a joint without torque control (naming it).
+        """
+        k_p = np.asarray(k_p, dtype=float)
+        if k_p.shape != self.k_p.shape:
+            raise ControlError(f"k_p has shape {k_p.shape}: expected {self.k_p.shape}")
+        bad = np.flatnonzero(~np.isfinite(k_p) | (k_p < 0) | (~self.mask & (k_p != 0)))
+        if bad.size:
+            i = int(bad[0])
+            expected = "0 (a position-controlled joint)" if not self.mask[i] else "a finite number >= 0 [-]"
+            raise ControlError(f"joint {self.joint_names[i]}: k_p = {float(k_p[i])!r}: expected {expected}")
+        self.k_p[:] = k_p
+
     @property
     def has_extra(self) -> bool:
         """True if a joint's motor model has extra terms."""

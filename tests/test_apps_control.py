@@ -93,8 +93,9 @@ def test_an_infeasible_task_is_refused_before_anything_moves(tmp_path, capsys):
     log = tmp_path / "run.parquet"
     assert control("--task", "swing", "--duration", "1.2", "--log", str(log)) == 2
     err = capsys.readouterr().err
-    assert 'phase "swing": joint RLEG_JOINT3 moves at 6.42 rad/s, above the velocity limit 5 rad/s' in err
-    assert "expected a duration of at least 1.54 s" in err
+    assert 'phase "swing": joint RLEG_JOINT3 moves at 6.42 rad/s (the estimator reads 6.48 rad/s' in err
+    assert "above 4.70 rad/s = (1 - 0.06, position mode) x the velocity limit 5 rad/s" in err
+    assert "expected a duration of at least 1.66 s" in err
     assert not log.exists() or len(LogReader(log).columns["t"]) == 0
 
 

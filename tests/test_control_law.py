@@ -114,3 +114,49 @@ def test_velocity_feedforward_reads_the_configured_velocity(source):
     assert np.abs(terms.ff_friction[:5]).min() > 0
     np.testing.assert_allclose(terms.fb_velocity, law.k7 * (dq_d - dq_hat), rtol=1e-12)
     np.testing.assert_allclose(terms.component_sum(), dq_err, atol=1e-15)
+
+
+def test_set_gains_writes_in_place_ramps_and_names_a_bad_joint():
+    """New gains land in the law's own arrays (the terms and the position integral see them), ramped half-cosine over
+    ``ramp`` (each tick moves the command by a fraction of the change), equal to a law built with them once the ramp
+    is over; a bad gain names the joint and changes nothing; entering torque mode (reset) completes a ramp."""
+    from dataclasses import replace
+
+    config = _config(force=False, k_iq=50.0)
+    law = TorqueControlLaw(config, str(MODEL_PATH), 1e-3)
+    k_s_id, k6_id = id(law.inverse_dynamics.k_s), id(law.k6)
+    soft = replace(config, gains={j: replace(g, k_p=1.0, k_s=g.k_s / 2, k_d=g.k_d * 2)
+                                  for j, g in config.gains.items()})
+    ref = TorqueControlLaw(soft, str(MODEL_PATH), 1e-3)
+    q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, w, rng = _inputs()
+    tau_hat = rng.normal(0, 20, 30)
+    terms, ref_terms = law.make_terms(), ref.make_terms()
+    old = law.update(terms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, w).copy()
+    with pytest.raises(Exception, match=r"set_gains: joint RLEG_JOINT2: k_s = -1.0: expected a finite number >= 0"):
+        law.set_gains(*soft_gains(soft, k_s={2: -1.0}))
+    with pytest.raises(Exception, match=r"set_gains: joint HEAD_JOINT0: k_p = 1.0: expected 0 \(a position-control"):
+        law.set_gains(*soft_gains(soft, k_p={JOINT_NAMES.index("HEAD_JOINT0"): 1.0}))
+    law.set_gains(*soft_gains(soft), ramp=0.01)  # 10 ticks
+    outs = [law.update(terms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, w).copy() for _ in range(12)]
+    new = ref.update(ref_terms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, w)
+    assert id(law.inverse_dynamics.k_s) == k_s_id and id(law.k6) == k6_id
+    np.testing.assert_allclose(law.inverse_dynamics.k_s, ref.inverse_dynamics.k_s)
+    np.testing.assert_allclose(law.position_integral.k_s, ref.position_integral.k_s)
+    np.testing.assert_allclose(law.k6, ref.k6)
+    steps = np.abs(np.diff([old, *outs], axis=0)).max(axis=1)
+    jump = np.abs(new - old).max()
+    assert steps.max() < 0.2 * jump  # no step: the change spread over the ramp (half-cosine, 10 ticks: <= 16 %)
+    law.set_gains(*soft_gains(config), ramp=1.0)
+    law.reset()
+    np.testing.assert_allclose(law.k6, TorqueControlLaw(config, str(MODEL_PATH), 1e-3).k6)
+
+
+def soft_gains(config, **overrides):
+    """(k_p, k_s, k_d) vectors of ``config``, with ``{name: {index: value}}`` overrides."""
+    out = []
+    for name in ("k_p", "k_s", "k_d"):
+        v = config.joint_vector(name)
+        for i, x in overrides.get(name, {}).items():
+            v[i] = x
+        out.append(v)
+    return out

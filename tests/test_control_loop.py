@@ -210,3 +210,19 @@ def test_while_tripped_a_mode_switch_is_refused_and_a_stop_ends_the_run(backend)
     assert not torque.ok and "cannot switch to torque mode: safety trip [command_error] RLEG_JOINT3" in torque.error
     assert stop.ok and stop.state == "stopped" and result.end == "stopped" and result.ticks == n + 21
     assert script.channel.closed
+
+
+def test_a_stop_requested_while_settling_keeps_a_torque_loop_in_position_mode(backend):
+    """A torque-mode loop stopped during its settle phase never switches to torque: it stops in position mode."""
+    modes = []
+
+    class Stop(LoopHook):
+        def on_tick(self, tick):
+            modes.append(tick.terms.mode)
+            if tick.k == 50:  # settling (100 ticks)
+                loop.request_stop()
+
+    loop = ControlLoop(backend, mode="torque", settle=SETTLE_S, hooks=[Stop()])
+    result = loop.run(lambda tick: loop.hold, None)
+    assert result.end == "stopped" and result.tripped is None
+    assert len(modes) > loop.settle_ticks and set(modes) == {"position"}

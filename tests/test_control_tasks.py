@@ -71,7 +71,13 @@ def test_a_bad_field_names_the_file_the_phase_and_the_field(tmp_path):
                                                                                    'name = "wave"\nmode = "force"')))
 
 
-def test_gains_in_a_position_phase_and_two_gain_sets_are_refused(tmp_path, robot):
+def test_gains_per_phase_are_converted_per_joint_and_bad_ones_refused_naming_the_phase(tmp_path, robot):
+    """Each torque phase has its own gains (K6 = 0.5 then 0.25: k_s per joint from its motor model); gains in a
+    position phase, a gain the controller refuses (k6 = 0 with control.toml's k7_scaling = "inverse_sqrt_k6") or a
+    user task's unknown or negative gain are refused, naming the phase and the field, before anything moves."""
+    from servotau.control.tasks import Phase
+    from servotau.control.tasks.references import Hold
+
     text = SINE.format(amplitude=0.1, frequency=1).replace('name = "wave"', 'name = "wave"\nk6 = 0.5')
     with pytest.raises(ConfigError, match=r"field 'phases.wave.k6' = 0.5: expected no gains in a position phase"):
         load_task(write(tmp_path, text))
@@ -84,11 +90,36 @@ def test_gains_in_a_position_phase_and_two_gain_sets_are_refused(tmp_path, robot
         [[phases]]
         name = "b"
         mode = "torque"
-        k6 = 0.25
+        k6 = {k6}
+        duration = 0.1
+        [[phases]]
+        name = "c"
         duration = 0.1
         """
-    with pytest.raises(ConfigError, match=r'phase "b": gains \{\'k6\': 0.25\} differ from phase "a"'):
-        TaskRunner(FileTask(load_task(write(tmp_path, text))), robot[0]).prepare(robot[1])
+    runner = TaskRunner(FileTask(load_task(write(tmp_path, text.format(k6=0.25)))), robot[0])
+    runner.prepare(robot[1])
+    motors = runner.manager().config.motors
+    for g, k6 in zip(runner.gains[:2], (0.5, 0.25), strict=True):
+        for j, m in motors.items():
+            i = robot[0].joint_index(j)
+            assert m.k_tau * (1 + g.k_p[i]) * g.k_s[i] == pytest.approx(k6)
+    assert runner.gains[2] is None  # a position phase keeps the gains in use
+    with pytest.raises(ConfigError, match=r'phase "b": gains \{\'k6\': 0.0\}: .*k7_scaling'):
+        TaskRunner(FileTask(load_task(write(tmp_path, text.format(k6=0.0)))), robot[0]).prepare(robot[1])
+
+    class Mine:
+        name, settle, ft_offsets, source = "mine", 0.5, "calibrate", "mine.py"
+
+        def __init__(self, gains):
+            self.gains = gains
+
+        def phases(self, info, q):
+            return [Phase("soft", Hold(q), "torque", 0.1, gains=self.gains)]
+
+    with pytest.raises(ConfigError, match=r'mine.py: phase "soft": gain \'k9\': expected one of'):
+        TaskRunner(Mine({"k9": 1.0}), robot[0]).prepare(robot[1])
+    with pytest.raises(ConfigError, match=r'mine.py: phase "soft": gain k_s = -1.0: expected a finite number >= 0'):
+        TaskRunner(Mine({"k_s": -1.0}), robot[0]).prepare(robot[1])
 
 
 def test_an_unknown_joint_is_refused_naming_it(tmp_path, robot):
@@ -107,15 +138,40 @@ def test_beyond_a_joint_limit_is_refused_naming_phase_joint_and_limit(tmp_path, 
 
 def test_too_fast_is_refused_naming_the_velocity_limit(tmp_path, robot):
     task = FileTask(load_task(write(tmp_path, SINE.format(amplitude=0.5, frequency=3.0))))
-    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 9.42 rad/s, above the '
-                                             r"velocity limit 5 rad/s"):
+    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 9.42 rad/s.*, above 4.70 '
+                                             r"rad/s = \(1 - 0.06, position mode\) x the velocity limit 5 rad/s"):
         TaskRunner(task, robot[0]).prepare(robot[1])
 
 
 def test_a_swing_too_short_is_refused_with_the_duration_it_needs(robot):
-    with pytest.raises(InfeasibleTask, match=r'swing.toml: phase "swing": joint RLEG_JOINT3 moves at 6.42 rad/s, '
-                                             r".*expected a duration of at least 1.54 s"):
+    """The duration the refusal asks for is accepted (the speed the estimator reads, with the margin)."""
+    with pytest.raises(InfeasibleTask, match=r'swing.toml: phase "swing": joint RLEG_JOINT3 moves at 6.42 rad/s '
+                                             r".*expected a duration of at least (\d\.\d\d) s") as refused:
         TaskRunner(FileTask.load("swing", duration=1.2), robot[0]).prepare(robot[1])
+    need = float(str(refused.value).rsplit("at least ", 1)[1].split(" s")[0])
+    assert 1.6 < need < 1.7
+    TaskRunner(FileTask.load("swing", duration=need), robot[0]).prepare(robot[1])
+
+
+def test_the_speed_the_estimator_reads_and_the_command_error_are_predicted_before_anything_moves(tmp_path, robot):
+    """A knee sinusoid at 7 Hz whose reference stays under the velocity limit is refused on the speed its encoder
+    filter will read (it tripped joint_velocity when run, CHANGELOG); with a command-error limit of 0.03 rad the
+    2 s swing (0.0247 rad predicted on the knee) is refused naming the joint, the value and the limit."""
+    from servotau.config import CONFIG_DIR
+
+    fast = SINE.format(amplitude=0.1, frequency=7.0).replace("frequency = 7.0", "frequency = 7.0\n    ramp = 0.5")
+    with pytest.raises(InfeasibleTask, match=r'phase "wave": joint RLEG_JOINT3 moves at 4.60 rad/s \(the estimator '
+                                             r"reads 6.\d\d rad/s: the servo's response through its filter\), above "
+                                             r"4.70 rad/s"):
+        TaskRunner(FileTask(load_task(write(tmp_path, fast))), robot[0]).prepare(robot[1])
+    control = (CONFIG_DIR / "control.toml").read_text().replace("max_command_error = 0.08", "max_command_error = 0.03")
+    control = control.replace('motors = "motors/', f'motors = "{CONFIG_DIR}/motors/')
+    (tmp_path / "control.toml").write_text(control)
+    runner = TaskRunner(FileTask.load("swing", duration=2.0), robot[0], control=tmp_path / "control.toml")
+    with pytest.raises(InfeasibleTask, match=r'phase "swing": joint RLEG_JOINT3 needs a command error \|q_des - q\| '
+                                             r"of 0.02\d rad at t = .*above 0.022 rad = \(1 - 0.25\) x the safety's "
+                                             r"max_command_error 0.03 rad"):
+        runner.prepare(robot[1])
 
 
 def test_a_jerk_limited_phase_shorter_than_its_trajectory_is_refused(tmp_path, robot):

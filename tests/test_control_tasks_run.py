@@ -182,10 +182,30 @@ ramp = 0.1
 
 def test_the_operator_starts_another_task_from_rest(tmp_path):
     """``start`` while holding: the new task (a file) begins where the reference rests and runs to its end; a task
-    that cannot be read is refused with the reason, nothing changed."""
+    that cannot be read is refused with the reason, nothing changed. The loop's thread never reads nor builds a
+    task: a worker does (TaskRunner.build), and the loop answers once it is done."""
     (tmp_path / "wave.toml").write_text(WAVE)
     channel = OperatorChannel()
     answers = {}
+    builders, loop_thread = [], []
+
+    class Watch(LoopHook):
+        def on_tick(self, tick):
+            loop_thread[:] = [threading.get_ident()]
+
+    real_build = TaskRunner.build
+
+    def build(self, task, q_start):
+        if loop_thread:  # once the loop runs
+            builders.append(threading.get_ident())
+        return real_build(self, task, q_start)
+
+    real_resolve = TaskRunner.__init__.__kwdefaults__["resolve"]
+
+    def resolve(name):
+        if loop_thread:
+            builders.append(threading.get_ident())
+        return real_resolve(name)
 
     def at(tick):
         if tick.t >= 0.05 and "bad" not in answers:
@@ -197,13 +217,55 @@ def test_the_operator_starts_another_task_from_rest(tmp_path):
                 target=lambda: answers.setdefault("ok", channel.request("start", 30, task=str(tmp_path / "wave.toml"))))
             answers["good"].start()
 
-    result, runner, record, _ = run(FileTask.load("hold").shortened(0.25, settle=SETTLE), operator=channel,
-                                    hooks=[Record(at=at)])
+    mp = pytest.MonkeyPatch()
+    mp.setattr(TaskRunner, "build", build)
+    mp.setattr(TaskRunner.__init__, "__kwdefaults__", {**TaskRunner.__init__.__kwdefaults__, "resolve": resolve})
+    try:
+        result, runner, record, _ = run(FileTask.load("hold").shortened(0.25, settle=SETTLE), operator=channel,
+                                        hooks=[Record(at=at), Watch()])
+    finally:
+        mp.undo()
     answers["good"].join(10)
     assert answers["ok"].ok, answers["ok"]
     assert not answers["refused"].ok and "start no_such_task: " in answers["refused"].error
     assert result.end == "completed" and result.tripped is None and record.phases[-1] == "wave"
     assert runner.task.name == "wave"
+    assert len(builders) == 3 and loop_thread[0] not in builders  # 2 reads, 1 build (the bad task is not read)
+
+
+REST = """
+name = "rest"
+[[phases]]
+name = "rest"
+duration = 0.1
+[phases.reference]
+type = "hold"
+"""
+
+
+def test_a_start_while_the_reference_moves_is_built_again_where_it_comes_to_rest(tmp_path):
+    """``start`` during a wave: built on where the reference would rest at the request, then (the reference having
+    moved on) built again on where the stop begun then rests; the new task runs from there, the command without a
+    jump."""
+    (tmp_path / "wave.toml").write_text(WAVE.replace("duration = 0.3", "duration = 2.0"))
+    (tmp_path / "rest.toml").write_text(REST)
+    channel = OperatorChannel()
+    answers = {}
+
+    def at(tick):
+        if tick.t >= 0.12 and "start" not in answers:
+            answers["start"] = threading.Thread(
+                target=lambda: answers.setdefault("ok", channel.request("start", 30, task=str(tmp_path / "rest.toml"))))
+            answers["start"].start()
+
+    result, runner, record, _ = run(FileTask.load(str(tmp_path / "wave.toml")), operator=channel,
+                                    hooks=[Record(at=at)])
+    answers["start"].join(10)
+    assert answers["ok"].ok, answers["ok"]
+    assert result.end == "completed" and result.tripped is None and runner.task.name == "rest"
+    assert record.phases[-1] == "rest" and "stop" in record.phases
+    steps = np.abs(np.diff(np.array(record.q_des), axis=0)).max(axis=1)
+    assert steps.max() < 2e-3, steps.max()  # [rad] per tick: the wave's own speed, no jump at the start
 
 
 class RobotOff(Counting):
@@ -254,6 +316,53 @@ def test_after_a_trip_and_a_reset_the_operator_starts_a_task_that_drives_again(t
     knee = backend.info.joint_index("RLEG_JOINT3")
     wave = np.array([q[knee] for q, ph in zip(record.q_des, record.phases, strict=True) if ph == "wave"])
     assert np.ptp(wave) > 0.02  # the wave drives the knee (+-0.05 rad): not the held posture
+
+
+TWO_GAINS = """
+name = "two_gains"
+[settle]
+duration = 0.15
+[[phases]]
+name = "stiff"
+mode = "torque"
+k6 = 1.0
+duration = 0.2
+[phases.reference]
+type = "hold"
+[[phases]]
+name = "soft"
+mode = "torque"
+k6 = 0.5
+duration = 0.2
+[phases.reference]
+type = "hold"
+"""
+
+
+def test_torque_phases_with_their_own_gains_run_and_the_command_stays_continuous(tmp_path):
+    """K6 = 1 then K6 = 0.5: the second phase's gains are set in place at its start (ramped: no step in q_des at the
+    boundary), the run ends completed, and the law runs the new K6 on every torque joint."""
+    (tmp_path / "two.toml").write_text(TWO_GAINS)
+    k6 = []
+    probe = Record(at=lambda tick: k6.append(runner_box[0].manager().law.k6.copy()))
+    runner_box = []
+    backend = Counting(SimRobot(SimConfig.named("hanging", seed=0)))
+    try:
+        runner = TaskRunner(FileTask.load(str(tmp_path / "two.toml")), backend.info)
+        runner_box.append(runner)
+        record = Record(runner)
+        loop = ControlLoop(backend, runner.manager(), hooks=[runner, record, probe], settle=0.15)
+        result = runner.run(loop)
+    finally:
+        backend.close()
+    assert result.end == "completed" and result.tripped is None
+    mask = runner.manager().torque_mask
+    phases = record.phases
+    k = phases.index("soft")
+    assert np.allclose(k6[k - 1][mask], 1.0) and np.allclose(k6[-1][mask], 0.5)
+    assert set(record.modes[k - 5:]) == {"torque"}
+    steps = np.abs(np.diff(np.array(record.q_des), axis=0)).max(axis=1)
+    assert steps[k - 5:k + 100].max() < 2e-4, steps[k - 5:k + 100].max()  # [rad] per tick, across the boundary
 
 
 @pytest.mark.slow

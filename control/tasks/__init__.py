@@ -11,13 +11,15 @@
 
 A task of your own subclasses :class:`Task` and returns :class:`Phase` objects built on the start posture
 (references: :class:`Hold`, :class:`Sinusoids`, :class:`JerkLimited`, :class:`MinJerk`, :class:`Tabled`);
-``servotau control --task mypkg.mytask:MyTask`` runs it. docs/control.md ("Tasks") has the file format.
+``servotau control --task mypkg.mytask:MyTask`` runs it. A torque phase may carry its own ``gains`` (``k6``, ``k_s``,
+``k7``, ``k_d``, ``k_p``). docs/control.md ("Tasks") has the file format.
 """
 
-from .build import FileTask, InfeasibleTask, Phase, Task, check_feasible, task_control_config
+from .build import FileTask, InfeasibleTask, Phase, PhaseGains, Task, check_feasible, phase_gains, task_control_config
+from .lag import LagModel, LagPrediction
 from .plugin import import_task, resolve_task
 from .references import Hold, JerkLimited, JointReference, MinJerk, Sinusoids, Tabled
-from .runner import TaskRunner
+from .runner import Plan, TaskRunner
 from .spec import ForceSpec, PhaseSpec, ReferenceSpec, TaskSpec, Wave, load_task, task_path
 from .status import StatusLine
 from .table import Table, load_table
@@ -29,9 +31,13 @@ __all__ = [
     "InfeasibleTask",
     "JerkLimited",
     "JointReference",
+    "LagModel",
+    "LagPrediction",
     "MinJerk",
     "Phase",
+    "PhaseGains",
     "PhaseSpec",
+    "Plan",
     "ReferenceSpec",
     "Sinusoids",
     "StatusLine",
@@ -45,6 +51,7 @@ __all__ = [
     "import_task",
     "load_table",
     "load_task",
+    "phase_gains",
     "resolve_task",
     "task_control_config",
     "task_path",

@@ -10,6 +10,7 @@ phase, the joint and the limit; the runner calls it after the first read and bef
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -21,8 +22,9 @@ from servotau.errors import ConfigError, ControlError
 from servotau.hal.types import RobotInfo
 
 from ..config import DEFAULT_PATH, ControlConfig, SafetyLimits
+from .lag import VELOCITY_MARGIN, LagModel, check_lag
 from .references import Hold, JerkLimited, JointReference, MinJerk, Sinusoids, Tabled, waypoint_targets
-from .spec import ForceSpec, TaskSpec, load_task
+from .spec import GAIN_KEYS, ForceSpec, TaskSpec, load_task
 from .table import load_table
 
 START_TOLERANCE = 0.01  # [rad] an absolute trajectory table must start this close to the posture at its phase
@@ -152,9 +154,12 @@ class FileTask(Task):
         return Hold(q0)
 
 
-def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits: SafetyLimits) -> None:
-    """Refuse phases beyond the joint limits (``q_min + margin``, ``q_max - margin``), the velocity limit
-    (``limits.max_velocity``) or shorter than their trajectory.
+def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits: SafetyLimits,
+                   lag: LagModel | None = None) -> None:
+    """Refuse phases beyond the joint limits (``q_min + margin``, ``q_max - margin``), shorter than their
+    trajectory, faster than ``(1 - VELOCITY_MARGIN[mode]) limits.max_velocity`` (with ``lag``: the speed the estimator
+    will read, the servo's response through its filter) or (with ``lag``) needing a torque or a command error beyond
+    the safety's (:mod:`.lag`).
 
     Raises:
         InfeasibleTask: Naming the task's file, the phase, the joint and the limit.
@@ -195,37 +200,106 @@ def check_feasible(task: Task, phases: Sequence[Phase], info: RobotInfo, limits:
                 raise InfeasibleTask(f"{where}: joint {names[i]} reaches {arr[i]:.3f} rad, beyond its {what} limit "
                                      f"{lim[i]:.3f} rad (q_{'min' if what == 'lower' else 'max'} "
                                      f"{'+' if what == 'lower' else '-'} joint_limit_margin {margin:g} rad)")
-        over = np.flatnonzero(v > limits.max_velocity)
+        pred = lag.predict(ref, p.length) if lag is not None and p.force is None else None
+        v_hat = v if pred is None else np.maximum(v, pred.velocity)
+        v_margin = VELOCITY_MARGIN[p.mode]
+        v_lim = (1.0 - v_margin) * limits.max_velocity
+        over = np.flatnonzero(v_hat > v_lim)
         if over.size:
-            i = int(over[np.argmax(v[over] / limits.max_velocity[over])])
+            i = int(over[np.argmax(v_hat[over] / v_lim[over])])
             need = ""
             if isinstance(ref, MinJerk):
-                need = f": expected a duration of at least {ref.duration * v[i] / limits.max_velocity[i]:.2f} s"
-            raise InfeasibleTask(f"{where}: joint {names[i]} moves at {v[i]:.2f} rad/s, above the velocity limit "
+                at_least = np.ceil(100 * ref.duration * v_hat[i] / v_lim[i]) / 100
+                need = f": expected a duration of at least {at_least:.2f} s"
+            read = f" (the estimator reads {v_hat[i]:.2f} rad/s: the servo's response through its filter)" \
+                if v_hat[i] > v[i] + 0.005 else ""
+            raise InfeasibleTask(f"{where}: joint {names[i]} moves at {v[i]:.2f} rad/s{read}, above {v_lim[i]:.2f} "
+                                 f"rad/s = (1 - {v_margin:g}, {p.mode} mode) x the velocity limit "
                                  f"{limits.max_velocity[i]:g} rad/s (control.toml [safety] max_velocity){need}")
+        refusal = check_lag(where, pred, info, limits) if pred is not None else None
+        if refusal is not None:
+            raise InfeasibleTask(refusal)
 
 
-def task_gains(task: Task, phases: Sequence[Phase]) -> tuple[dict, ForceSpec | None]:
-    """The gains and the force task of the run: every torque phase that sets gains sets the same ones, every
-    force phase the same sensor, frame, axes and k_f (the controller's gains are fixed for a run).
+def task_force(task: Task, phases: Sequence[Phase]) -> ForceSpec | None:
+    """The force task of the run: every force phase names the same sensor, frame, axes and k_f (the controller's
+    force task is built once, with the controller).
 
     Raises:
         ConfigError: Two phases disagree (naming both).
     """
-    gains, force, gp, fp = {}, None, None, None
+    force, fp = None, None
     for p in phases:
-        if p.gains:
-            if gp is not None and dict(p.gains) != gains:
-                raise ConfigError(f'{task.source}: phase "{p.name}": gains {dict(p.gains)} differ from phase "{gp}"\'s '
-                                  f"{gains}: expected the same gains in every torque phase (fixed for a run)")
-            gains, gp = dict(p.gains), gp or p.name
         if p.force is not None:
             key = (p.force.sensor, p.force.frame, p.force.offset, p.force.axes, p.force.k_f)
             if fp is not None and key != fp[1]:
                 raise ConfigError(f'{task.source}: phase "{p.name}": force task {key} differs from phase "{fp[0]}"\'s: '
                                   "expected one force task per run")
             force, fp = p.force, fp or (p.name, key)
-    return gains, force
+    return force
+
+
+@dataclass(frozen=True)
+class PhaseGains:
+    """The gains a torque phase runs with, each (n,), 0 on position-controlled joints (:meth:`TorqueControlLaw.
+    set_gains`)."""
+
+    k_p: np.ndarray  # [-]
+    k_s: np.ndarray  # [N m/rad]
+    k_d: np.ndarray  # [N m s/rad]
+
+
+def check_phase_gains(task: Task, p: Phase) -> None:
+    """A phase's ``gains``: keys among :data:`~.spec.GAIN_KEYS` (not both forms of one gain), finite numbers >= 0,
+    in a torque phase only (a task class may set anything; a task file is checked when read).
+
+    Raises:
+        ConfigError: Naming the task, the phase and the gain.
+    """
+    where = f'{task.source}: phase "{p.name}"'
+    for key, value in dict(p.gains).items():
+        if key not in GAIN_KEYS:
+            raise ConfigError(f"{where}: gain {key!r}: expected one of {list(GAIN_KEYS)}")
+        if isinstance(value, bool) or not isinstance(value, int | float) or not (math.isfinite(value) and value >= 0):
+            raise ConfigError(f"{where}: gain {key} = {value!r}: expected a finite number >= 0")
+    for a, b in (("k6", "k_s"), ("k7", "k_d")):
+        if a in p.gains and b in p.gains:
+            raise ConfigError(f"{where}: gains {a} and {b}: expected either, not both")
+    if p.gains and p.mode != "torque":
+        raise ConfigError(f'{where}: gains {dict(p.gains)} in a {p.mode} phase: expected mode = "torque" (or no gains)')
+
+
+def phase_gains(task: Task, phases: Sequence[Phase], info: RobotInfo, path: str | Path = DEFAULT_PATH,
+                cache: dict | None = None) -> list[PhaseGains | None]:
+    """The gains of each phase (None for a position phase): control.toml's (``path``) with the phase's ``gains`` on
+    top, converted per joint as the file's own are (k6, k7, k7_per_k_v, k7_scaling). ``cache``: gain sets already
+    converted (by their items), kept between calls.
+
+    Raises:
+        ConfigError: A gain the controller refuses, naming the task, the phase, and the file's field or the joint.
+    """
+    cache = {} if cache is None else cache
+    out: list[PhaseGains | None] = []
+    for p in phases:
+        check_phase_gains(task, p)
+        if p.mode != "torque":
+            out.append(None)
+            continue
+        key = tuple(sorted(dict(p.gains).items()))
+        if key not in cache:
+            try:
+                config = task_control_config(info, dict(p.gains), None, path, file=f'{task.source} phase "{p.name}"')
+            except (ConfigError, ControlError) as exc:
+                raise ConfigError(f'{task.source}: phase "{p.name}": gains {dict(p.gains)}: {exc}') from None
+            g = PhaseGains(*(config.joint_vector(k) for k in ("k_p", "k_s", "k_d")))
+            bad = [(j, k) for k in ("k_p", "k_s", "k_d") for j, v in zip(info.joint_names, getattr(g, k), strict=True)
+                   if not math.isfinite(v)]
+            if bad:
+                raise ConfigError(f'{task.source}: phase "{p.name}": joint {bad[0][0]}: {bad[0][1]} is not finite: '
+                                  "expected finite gains")
+            cache[key] = g
+        out.append(cache[key])
+    return out
 
 
 def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: ForceSpec | None,

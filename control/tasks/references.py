@@ -30,6 +30,11 @@ class JointReference:
     def sample(self, t: float) -> TrajectoryPoint:
         raise NotImplementedError
 
+    def samples(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``q, dq, ddq`` (m, n) at the times ``ts`` (m,) [s] (a reference may do it at once)."""
+        pts = [self.sample(float(t)) for t in ts]
+        return np.array([p.q for p in pts]), np.array([p.dq for p in pts]), np.array([p.ddq for p in pts])
+
     @property
     def end(self) -> np.ndarray:
         """[rad] (n,) the posture at the end (endless: the start)."""
@@ -90,6 +95,17 @@ class Sinusoids(JointReference):
         dq[self.index] = dA * s + A * self.omega * c
         ddq[self.index] = 2 * dA * self.omega * c - A * self.omega**2 * s  # d2A/dt2 = 0 almost everywhere
         return TrajectoryPoint(q, dq, ddq)
+
+    def samples(self, ts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(ts, dtype=float)[:, None]
+        m = t.shape[0]
+        q, dq, ddq = np.tile(self.q0, (m, 1)), np.zeros((m, self.q0.size)), np.zeros((m, self.q0.size))
+        A, dA = self._amp(t)
+        s, c = np.sin(self.omega * t + self.phi), np.cos(self.omega * t + self.phi)
+        q[:, self.index] += A * s
+        dq[:, self.index] = dA * s + A * self.omega * c
+        ddq[:, self.index] = 2 * dA * self.omega * c - A * self.omega**2 * s
+        return q, dq, ddq
 
     def envelope(self, length):
         T = math.inf if length is None else length

@@ -158,7 +158,7 @@ class _ModeOverride(Task):
             if p.force is not None and self.mode != "torque":
                 raise ConfigError(f'{self.source}: phase "{p.name}" has a force task: --mode {self.mode} '
                                   "expected torque (or no --mode)")
-            out.append(dataclasses.replace(p, mode=self.mode))
+            out.append(dataclasses.replace(p, mode=self.mode, gains=p.gains if self.mode == "torque" else {}))
         return out
 
 
@@ -186,7 +186,9 @@ def register(sub) -> None:
                    help="the mode of every phase (default: each phase's own)")
     p.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                    help="[s] the length of the task's duration_phase (swing: the swing, default 3 s; a duration too "
-                        "short for the controller's velocity limit is refused)")
+                        "short for the safety's limits, the speed the estimator will read with a margin, the torque "
+                        "or the command error, is refused before anything moves with the duration it needs: "
+                        "position mode at least 1.65 s, torque mode 1.76 s)")
     p.add_argument("--ft-offsets", default=None, metavar="FILE",
                    help='TOML of F/T offsets [N, N m], sensor = [fx, fy, fz, tx, ty, tz], for tasks with '
                         'settle.ft_offsets = "external" (measured with the feet free)')
@@ -258,7 +260,17 @@ def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = 
         raise ConfigError("duration: applies to a task given by name or file")
     if mode is not None:
         task = _ModeOverride(task, mode)
-    runner = TaskRunner(task, info, progress=progress, control=control_path or DEFAULT_CONTROL)
+    shape = None
+    if trip_at is not None:
+        if TRIP_JOINT not in info.joint_names:
+            raise ConfigError(f"--trip-at: the fault injection moves {TRIP_JOINT}, which {info.name} does not have")
+        jump = np.zeros(info.nq)
+        jump[info.joint_names.index(TRIP_JOINT)] = TRIP_JUMP
+
+        def shape(tick: Tick, point):  # the task's reference only: the loop's holds and stops stay as they are
+            return dataclasses.replace(point, q=point.q + jump) if tick.t >= trip_at else point
+
+    runner = TaskRunner(task, info, progress=progress, control=control_path or DEFAULT_CONTROL, shape=shape)
     error = TrackingError(info.nq)
     hooks = [runner, error, _TripNotice(progress, hint or "stopping")]
     log_hook = LogHook(writer) if writer is not None else None
@@ -276,24 +288,10 @@ def run_session(backend, *, task: Task | str = DEFAULT_TASK, mode: str | None = 
         except OSError as exc:
             raise ConfigError(f"--save-ft-offsets {save_ft_offsets}: cannot write it ({exc.strerror})") from None
         loop.hooks = (*loop.hooks, SaveOffsets(save_ft_offsets, loop.estimator, info.ft_sensor_names))
-    runner.prepare(loop.start().q)  # InfeasibleTask before the first command
-    runner.attach(loop)
     if loop_ready is not None:
         loop_ready(loop)
-    jump = np.zeros(info.nq)
-    if trip_at is not None:
-        if TRIP_JOINT not in info.joint_names:
-            raise ConfigError(f"--trip-at: the fault injection moves {TRIP_JOINT}, which {info.name} does not have")
-        jump[info.joint_names.index(TRIP_JOINT)] = TRIP_JUMP
-
-    def reference(tick: Tick):
-        point = runner.reference(tick)
-        if point is not None and trip_at is not None and tick.t >= trip_at:
-            point = dataclasses.replace(point, q=point.q + jump)
-        return point
-
     try:
-        result = loop.run(reference, None, operator=operator, hold_timeout=hold_timeout, actions=runner.actions)
+        result = runner.run(loop, operator=operator, hold_timeout=hold_timeout)  # InfeasibleTask: nothing sent
     finally:
         if log_hook is not None:
             log_hook.flush()
