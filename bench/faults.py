@@ -4,6 +4,7 @@ Usage:
     python bench/faults.py --json             # one JSON object (about 5-10 min on a 2-core machine)
     python bench/faults.py --json --quick     # a smoke run: fewer messages and runs
     python bench/faults.py --json --quick --only fuzz,takeover
+    python bench/faults.py --json --only trip --clocks realtime --trip-runs 10
 
 The robot is a separate process, ``python -m servotau.hal`` serving FakeRobot (30 joints) or the simulated HRP-2,
 or ``servotau sim``; the controller is ``servotau control`` or a Zenoh peer of this process (bench/_faults_peers.py:
@@ -29,7 +30,8 @@ its own session, like any program on the network). Figures (target in ``targets`
   clocks, ``--runs`` each: from the controller's SIGKILL / SIGSTOP to the first frame flagged HOLDING, wall
   time, seen by an observer peer subscribing to frames. Targets 20 and 50 ms. ``killed_controller_exit_ms``: from
   the SIGKILL to the process's exit as its parent sees it (its sockets close, and zenoh can see it, only then).
-- ``trip_drop_mrad_max``: ``servotau control --trip-at 0.5 --hold-timeout 12`` on ``servotau sim`` (both clocks):
+- ``trip_drop_mrad_max``: ``servotau control --trip-at 0.5 --hold-timeout 12`` on ``servotau sim`` (``--trip-runs``
+  per clock of ``--clocks``, default 3 each):
   the largest joint motion (encoders, robot log) in the 10 s of robot time after the controller's trip, and,
   reported apart, in the 5 s after the controller's exit (the robot holding alone). Target 10 mrad.
 - ``realtime_torque_runs_completed_under_load_fraction``: ``--load-runs`` runs of ``servotau sim --clock
@@ -373,13 +375,15 @@ def _motion_mrad(c: dict, names, t_from: float, t_to: float) -> float:
     return float(np.nanmax(np.abs(win - q[i0]))) * 1e3 if len(win) else float("nan")
 
 
-def _trip_run(tmp: Path, clock: str, trip_at: float = 0.5, window: float = 10.0, after_exit: float = 5.0) -> dict:
-    rlog, clog = tmp / f"trip-{clock}-robot.parquet", tmp / f"trip-{clock}-ctl.parquet"
+def _trip_run(tmp: Path, clock: str, i: int = 0, trip_at: float = 0.5, window: float = 10.0,
+              after_exit: float = 5.0) -> dict:
+    tag = f"trip-{clock}-{i}"
+    rlog, clog = tmp / f"{tag}-robot.parquet", tmp / f"{tag}-ctl.parquet"
     with sim_process(tmp, clock=clock, log=rlog) as (_, port):
         obs = Peer("hrp2", f"tcp/127.0.0.1:{port}")
         try:
             ctl = control_process(tmp, port, "--trip-at", str(trip_at), "--hold-timeout", "12", "--log", str(clog),
-                                  tag=f"trip-{clock}")
+                                  tag=tag)
             try:
                 code = ctl.wait(180)
             finally:
@@ -391,7 +395,7 @@ def _trip_run(tmp: Path, clock: str, trip_at: float = 0.5, window: float = 10.0,
     names = [n for n in read_log(rlog)[0].joint_names]
     _, c = read_log(rlog)
     _, cc = read_log(clog)
-    text = (tmp / f"trip-{clock}-{port}.out").read_text()
+    text = (tmp / f"{tag}-{port}.out").read_text()
     said = re.search(r"safety trip \[command_error\].* at t = ([0-9.]+) s", text)
     t_trip = float(said.group(1)) if said else float(cc["t"][0]) + SETTLE + trip_at  # as the controller reports it
     r = {"clock": clock, "controller_exit_code": code, "trip_robot_time_s": t_trip,
@@ -403,10 +407,13 @@ def _trip_run(tmp: Path, clock: str, trip_at: float = 0.5, window: float = 10.0,
     return r
 
 
-def bench_trip(tmp: Path, quick: bool) -> dict:
-    runs = [_trip_run(tmp, c) for c in (("lockstep",) if quick else ("lockstep", "realtime"))]
-    return {"trip_drop_mrad_max": max(r["drop_mrad"] for r in runs),
-            "trip_drop_after_exit_mrad_max": max(r["after_exit_mrad"] for r in runs), "trip_runs": runs}
+def bench_trip(tmp: Path, clocks: tuple[str, ...], runs: int) -> dict:
+    """``runs`` trip runs per clock of ``clocks``; the figure is the largest drop of all."""
+    results = [_trip_run(tmp, c, i) for c in clocks for i in range(runs)]
+    drops = {c: [r["drop_mrad"] for r in results if r["clock"] == c] for c in clocks}
+    return {"trip_drop_mrad_max": max(r["drop_mrad"] for r in results),
+            "trip_drop_after_exit_mrad_max": max(r["after_exit_mrad"] for r in results), "trip_drop_mrad": drops,
+            "trip_runs": results}
 
 
 # ---------------------------------------------------------------------------------------------- load
@@ -486,6 +493,9 @@ def main() -> int:
     p.add_argument("--only", default=",".join(PARTS), help=f"comma-separated parts of {PARTS}")
     p.add_argument("--fuzz", type=int, help="malformed commands (default 20000; quick 200)")
     p.add_argument("--runs", type=int, help="hold-latency runs per clock and fault (default 5; quick 1)")
+    p.add_argument("--trip-runs", type=int, help="controller-trip runs per clock (default 3; quick 1)")
+    p.add_argument("--clocks", default="lockstep,realtime",
+                   help="clock modes of the trip runs (default lockstep,realtime; quick lockstep)")
     p.add_argument("--load-runs", type=int, help="realtime torque runs under load (default 5; quick 1)")
     p.add_argument("--load-hal", help="hal.toml of the robot and controller in the load runs (default: "
                    "config/hal.toml with SCHED_FIFO realtime_priority for both)")
@@ -498,8 +508,12 @@ def main() -> int:
     if unknown := set(parts) - set(PARTS):
         p.error(f"--only {a.only}: unknown parts {sorted(unknown)}; expected some of {PARTS}")
     q = a.quick
+    clocks = tuple(x for x in a.clocks.split(",") if x) if not q or "--clocks" in sys.argv else ("lockstep",)
+    if not clocks or set(clocks) - {"lockstep", "realtime"}:
+        p.error(f"--clocks {a.clocks}: expected lockstep, realtime or both, comma-separated")
     config = {"quick": q, "parts": parts, "fuzz": a.fuzz or (200 if q else 20_000),
-              "runs": a.runs or (1 if q else 5), "load_runs": a.load_runs or (1 if q else 5),
+              "runs": a.runs or (1 if q else 5), "trip_runs": a.trip_runs or (1 if q else 3),
+              "trip_clocks": list(clocks), "load_runs": a.load_runs or (1 if q else 5),
               "takeover_ticks": 100 if q else 1000, "tls": not (a.no_tls or q), "creep_ticks": 100 if q else 600,
               "load_hal": a.load_hal or "config/hal.toml + realtime_priority",
               "load_ordinary_runs": a.load_ordinary_runs if a.load_ordinary_runs is not None else (0 if q else 3)}
@@ -515,7 +529,7 @@ def main() -> int:
                  "creep": lambda: bench_creep(tmp, config["creep_ticks"]),
                  "nan": lambda: bench_nan(tmp, q),
                  "hold": lambda: bench_hold(tmp, config["runs"]),
-                 "trip": lambda: bench_trip(tmp, q),
+                 "trip": lambda: bench_trip(tmp, clocks, config["trip_runs"]),
                  "load": lambda: bench_load(tmp, config["load_runs"], Path(a.load_hal) if a.load_hal else None,
                                             ordinary_runs=config["load_ordinary_runs"])}
         for part in PARTS:

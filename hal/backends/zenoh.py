@@ -315,7 +315,7 @@ class ZenohBackend(Backend):
         if self._error is not None:
             raise self._error
         self._min_seq = max(self._min_seq, answers.seq)
-        self._pub.put(encode_command(answers.seq, answers.time, q_des), attachment=self._token)
+        self._pub.put(encode_command(answers.seq, answers.time, q_des, self.hold_requested), attachment=self._token)
 
     def ground_truth(self, wait: float = 0.005) -> GroundTruth | None:
         """Ground truth of the tick of the last frame read (waits up to ``wait`` [s] for it to arrive;

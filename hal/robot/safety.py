@@ -67,6 +67,11 @@ class SafetyConfig:
     # machine to wake the robot's loop and deliver the frame (with 40 ms: 40.6-50.3 ms seen, 20 runs, load 5-6).
     lockstep_hold_after: float = setting(0.035, unit="s", min=0, strict_min=True)
     lockstep_servo_off_after: float | None = setting(None, unit="s", min="lockstep_hold_after", strict_min=True)
+    # A hold caught moving brakes: q_des = q_hold - hold_damping * dq (the encoders' backward difference within
+    # +-max_velocity), the term faded out over hold_brake_time: damping the servo lacks (the controller's
+    # [safety] hold_damping / hold_brake_time do the same on its side). 0: hold without braking.
+    hold_damping: float = setting(0.01, unit="s", min=0)
+    hold_brake_time: float = setting(0.2, unit="s", min=0)
 
     def __post_init__(self):
         check_settings(self, HalError)

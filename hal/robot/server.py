@@ -80,7 +80,8 @@ class RobotServer:
         self._frame = None  # current frame: published, not stepped yet
         self._truth = None
         self._servo_off_sent = False
-        self._pending: tuple[np.ndarray, float, int] | None = None  # real time: newest (q_des, receive time, seq)
+        self._pending: tuple[np.ndarray, float, int, bool] | None = None  # real time: newest (q_des, receive time,
+        # seq, COMMAND_HOLD)
         self._published = -1  # seq of the last published frame
         self._t_published = math.nan  # when it was (last) published, time.monotonic() [s]
         self._controller_lost = False
@@ -98,7 +99,7 @@ class RobotServer:
         t = time.monotonic()
         buf = sample.payload.to_bytes()
         try:
-            seq, t_cmd, q_des = decode_command(buf, self.info.joint_names)
+            seq, t_cmd, q_des, hold = decode_command(buf, self.info.joint_names)
         except MalformedMessage as exc:
             with self._cond:
                 self.firmware.reject(reject_reason(exc), str(exc))
@@ -120,13 +121,13 @@ class RobotServer:
                 self.firmware.stale()
             elif not self.lockstep:  # real time: the newest command wins, applied at the end of the tick
                 if self._pending is None or seq >= self._pending[2]:
-                    self._pending = (q_des, t, seq)
+                    self._pending = (q_des, t, seq, hold)
                 else:
                     self.firmware.stale()
             else:  # lock-step: the command answering the current frame
-                self.firmware.accept(q_des, t)
+                self.firmware.accept(q_des, t, hold)
                 self.gate.applied(seq)
-                if self._frozen and self.firmware.state == FirmwareState.RUNNING:  # resumed: the watchdog re-arms
+                if self._frozen and self._commanded():  # resumed: the watchdog re-arms
                     self._frozen = False
                     self._cond.notify_all()
                 try:
@@ -355,12 +356,12 @@ class RobotServer:
         with self._cond:
             while not self._stop.is_set():
                 now = time.monotonic()
-                state = fw.state
+                state, commanded = fw.state, self._commanded()
                 if self._frozen and (state != FirmwareState.HOLDING or self._controller_lost or fw.servo_off_due(now)):
                     self._frozen = False  # resumed by a command, the controller is gone, or servo_off_after: step on
-                if state != FirmwareState.RUNNING:
+                if not commanded:
                     self._controller_lost = False  # nothing to hold
-                if state == FirmwareState.RUNNING:
+                if commanded:
                     deadline = -math.inf if self._controller_lost else fw.last_command_time + safety.hold_after
                 elif state == FirmwareState.WAITING or self._frozen:  # the robot does not move
                     deadline = self._t_published + self.config.republish_interval
@@ -370,12 +371,17 @@ class RobotServer:
                     self._cond.wait(deadline - now)
                 elif state == FirmwareState.WAITING or self._frozen:
                     self._publish(truth=False)  # for controllers that join late; flagged HOLDING when frozen
-                elif state == FirmwareState.RUNNING and not self._controller_lost:
+                elif commanded and not self._controller_lost:
                     fw.watchdog(now)  # a hung controller: hold, frozen
                     self._frozen = True
                     self._publish(truth=False)
                 else:
                     self._tick(now)  # the firmware holds (or stays off)
+
+    def _commanded(self) -> bool:
+        """The claimer drives the robot: RUNNING, or holding on its commands' COMMAND_HOLD (lock-step then waits for
+        each command, as while running)."""
+        return self.firmware.state == FirmwareState.RUNNING or self.firmware.hold_commanded
 
     def _run_realtime(self) -> None:
         period, paced = self.info.period, self.config.clock == "realtime"
@@ -395,8 +401,8 @@ class RobotServer:
                 if self._stop.is_set():
                     break
                 if self._pending is not None:
-                    q_des, t_recv, seq = self._pending
-                    self.firmware.accept(q_des, t_recv)
+                    q_des, t_recv, seq, hold = self._pending
+                    self.firmware.accept(q_des, t_recv, hold, self.gate.newest - seq)
                     self.gate.applied(seq)
                     self._pending = None
                 self._tick(now)
