@@ -113,3 +113,18 @@ def test_lockstep_steps_once_per_hold_command_and_resumes(tmp_path):
     assert np.diff(seqs).tolist() == [1] * 29  # one step per command, none of the robot's own
     assert st["state"] == "HOLDING" and st["hold_commanded"] and st["hold_commands"] == 30, st
     assert st2["state"] == "RUNNING" and not st2["hold_commanded"] and st2["holds"] == 1, st2
+
+
+def test_realtime_pending_command_holds_from_the_oldest_hold_commands_frame():
+    """A controller that fell behind sends the hold commands of frames 7..9 in one tick: the newest is applied, the
+    hold starts from frame 7; a command older than the pending one is stale."""
+    from servotau.hal.robot.gate import PendingCommand
+
+    p, q = PendingCommand(), np.zeros(3)
+    assert p.take() is None
+    assert p.offer(q, 0.1, 5, False)
+    assert p.take()[2:] == (5, False, 5)
+    for seq in (8, 7, 9):
+        p.offer(q, 0.2, seq, True)
+    assert p.take()[2:] == (9, True, 7) and p.take() is None
+    assert p.offer(q, 0.3, 12, False) and not p.offer(q, 0.3, 11, False)

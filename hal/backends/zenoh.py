@@ -23,7 +23,7 @@ from servotau.config import Section, check_settings, load_dataclass, setting
 from ..backend import Backend
 from ..config import endpoint_list, with_override
 from ..errors import HalError, HalTimeoutError, MalformedMessage, RobotLost, RobotServoOff
-from ..robot.claim import claim_key, claim_reply, claim_request, release_request, token_key
+from ..robot.claim import claim_key, claim_request, claim_with_retry, release_request, token_key
 from ..robot.realtime import set_realtime_priority
 from ..types import GroundTruth, SensorFrame
 from ..wire.protocol import (
@@ -176,9 +176,16 @@ class ZenohBackend(Backend):
         """Claim the robot (hal/robot/claim.py): its token, or ClaimRefused naming the holder."""
         z = self._session.z
         request = claim_request(str(z.zid()), socket.gethostname(), os.getpid(), getpass.getuser())
-        for r in z.get(claim_key(self.keys.prefix), payload=request, timeout=timeout):
-            if r.ok is not None:
-                return claim_reply(r.ok.payload.to_bytes(), self.robot_name)
+
+        def ask(t: float) -> bytes | None:
+            for r in z.get(claim_key(self.keys.prefix), payload=request, timeout=t):
+                if r.ok is not None:
+                    return r.ok.payload.to_bytes()
+            return None
+
+        token = claim_with_retry(ask, self.robot_name, timeout)
+        if token is not None:
+            return token
         raise HalTimeoutError(f'robot "{self.robot_name}" did not answer the claim on {claim_key(self.keys.prefix)} '
                               f"within {timeout} s: an older robot process, or its access control does not let "
                               "this identity claim it (see [hal.server.access])")

@@ -379,4 +379,4 @@ class Firmware:
         return {"state": self.state.name, "servo_off_reason": self.servo_off_reason, "trip_reason": self.trip_reason,
                 "hold_reason": self.hold_reason, "hold_commanded": self.hold_commanded,
                 "sensor_fault": self.sensor_fault,
-                "rejected": dict(self.rejected), **self.counters}
+                "rejected": dict(self.rejected), "commands_not_claimer": self.rejected["not_claimer"], **self.counters}

@@ -44,7 +44,7 @@ from . import operator
 from .claim import ClaimTable, claim_key
 from .config import CLOCKS, ServerConfig
 from .firmware import LOG_EXTRA, Firmware, FirmwareState, checked_frame
-from .gate import STALE, TAKE, CommandGate
+from .gate import STALE, TAKE, CommandGate, PendingCommand
 from .realtime import set_realtime_priority, set_timer_slack
 from .served import ServedRobot
 
@@ -80,8 +80,7 @@ class RobotServer:
         self._frame = None  # current frame: published, not stepped yet
         self._truth = None
         self._servo_off_sent = False
-        self._pending: tuple[np.ndarray, float, int, bool] | None = None  # real time: newest (q_des, receive time,
-        # seq, COMMAND_HOLD)
+        self._pending = PendingCommand()  # real time: the command to apply at the end of the tick
         self._published = -1  # seq of the last published frame
         self._t_published = math.nan  # when it was (last) published, time.monotonic() [s]
         self._controller_lost = False
@@ -120,9 +119,7 @@ class RobotServer:
             if verdict == STALE:
                 self.firmware.stale()
             elif not self.lockstep:  # real time: the newest command wins, applied at the end of the tick
-                if self._pending is None or seq >= self._pending[2]:
-                    self._pending = (q_des, t, seq, hold)
-                else:
+                if not self._pending.offer(q_des, t, seq, hold):
                     self.firmware.stale()
             else:  # lock-step: the command answering the current frame
                 self.firmware.accept(q_des, t, hold)
@@ -207,7 +204,7 @@ class RobotServer:
                 if holder is not None:
                     logger.warning("%s: the reset ends the claim of %s", self.info.name, holder.describe())
                 self._servo_off_sent = False
-                self._pending = None
+                self._pending.clear()
                 if self._serving:
                     self._publish(truth=False)
                 self._cond.notify_all()
@@ -400,11 +397,10 @@ class RobotServer:
             with self._cond:
                 if self._stop.is_set():
                     break
-                if self._pending is not None:
-                    q_des, t_recv, seq, hold = self._pending
-                    self.firmware.accept(q_des, t_recv, hold, self.gate.newest - seq)
+                if (taken := self._pending.take()) is not None:
+                    q_des, t_recv, seq, hold, first = taken
+                    self.firmware.accept(q_des, t_recv, hold, self.gate.newest - first)
                     self.gate.applied(seq)
-                    self._pending = None
                 self._tick(now)
 
     def _sleep_until(self, deadline: float) -> None:
