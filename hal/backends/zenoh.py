@@ -156,9 +156,9 @@ class ZenohBackend(Backend):
         # the claiming session's own token first: the robot sees this session go even through a router
         s.keep(z.liveliness().declare_token(token_key(k.alive_controller, str(z.zid()))))
         self._token = self._claim(max(deadline - time.monotonic(), 0.5))
-        self._frames = s.keep(z.declare_subscriber(k.frame, zenoh.handlers.RingChannel(_FRAMES_KEPT)))
-        if self._want_truth:
+        if self._want_truth:  # first: the robot then knows it is wanted before this session sees a frame
             s.keep(z.declare_subscriber(k.truth, callback(self._on_truth)))
+        self._frames = s.keep(z.declare_subscriber(k.frame, zenoh.handlers.RingChannel(_FRAMES_KEPT)))
         self._pub = s.keep(z.declare_publisher(k.command, express=True,
                                                congestion_control=zenoh.CongestionControl.BLOCK,
                                                priority=zenoh.Priority.REAL_TIME))

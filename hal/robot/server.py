@@ -180,7 +180,13 @@ class RobotServer:
         query.reply(str(query.key_expr), reply)
 
     def _on_truth_matching(self, status: zenoh.MatchingStatus) -> None:
+        """Somebody subscribes to the truth now (or nobody any more): the truth of the frame on the wire goes out
+        at once, so that a controller that connects has the truth of its first frame."""
         self._truth_wanted = status.matching
+        if status.matching:
+            with self._cond:
+                if self._serving:
+                    self._put_truth()
 
     def _on_query(self, query: zenoh.Query) -> None:
         key = str(query.key_expr)
@@ -301,16 +307,26 @@ class RobotServer:
                     ", ".join(cfg.listen or cfg.connect))
 
     def _publish(self, truth: bool = True) -> None:
-        """Publish the current frame, then (``truth``) read and publish its ground truth (under _cond)."""
+        """Publish the current frame, then its ground truth (under _cond): ``truth``, a new frame: read the truth
+        (if somebody wants it or the log); else a republished frame: the truth read with it (read now if nobody
+        wanted it then: the robot has not stepped since)."""
         frame = self._frame
         self._published = frame.seq
         self._t_published = time.monotonic()
         self.gate.published(frame.seq, frame.time)
         self._pub_frame.put(encode_frame(frame, self.firmware.flags))
-        send = self.config.publish_truth and self._truth_wanted
         if truth:  # after the frame: off the controller's critical path; only if somebody wants it
+            send = self.config.publish_truth and self._truth_wanted
             self._truth = self.robot.ground_truth() if send or self._log is not None else None
-        if send and self._truth is not None:
+        self._put_truth()
+
+    def _put_truth(self) -> None:
+        """Publish the truth of the current frame if somebody wants it (under _cond)."""
+        if not (self.config.publish_truth and self._truth_wanted) or self._frame is None:
+            return
+        if self._truth is None or self._truth.seq != self._frame.seq:
+            self._truth = self.robot.ground_truth()
+        if self._truth is not None:
             self._pub_truth.put(encode_truth(self._truth))
 
     def _tick(self, now: float) -> None:
