@@ -277,7 +277,8 @@ def malformed_commands(n: int, n_joints: int, seq: int, t: float, q: np.ndarray,
         "n_values": lambda: header(nv=[0, n_joints - 1, n_joints + 1, 2**32 - 1][int(rng.integers(4))]),
         "values_nan_inf": bad_values,
         "time": bad_time,
-        "flags": lambda: header(flags=int(rng.choice([0xFFFF, 1, 2, 0x8000, int(rng.integers(1, 65536))]))),
+        # any bit beyond COMMAND_HOLD (bit 0, a valid hold command)
+        "flags": lambda: header(flags=int(rng.choice([0xFFFF, 2, 3, 0x8000, int(rng.integers(1, 32768)) << 1]))),
         "future_seq": lambda: header(s=[seq + 1, seq + 1000, 2**63, 2**64 - 1][int(rng.integers(4))]),
     }
     names = list(kinds)

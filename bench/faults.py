@@ -4,6 +4,7 @@ Usage:
     python bench/faults.py --json             # one JSON object (about 5-10 min on a 2-core machine)
     python bench/faults.py --json --quick     # a smoke run: fewer messages and runs
     python bench/faults.py --json --quick --only fuzz,takeover
+    python bench/faults.py --json --only trip --clocks realtime --trip-runs 10
 
 The robot is a separate process, ``python -m servotau.hal`` serving FakeRobot (30 joints) or the simulated HRP-2,
 or ``servotau sim``; the controller is ``servotau control`` or a Zenoh peer of this process (bench/_faults_peers.py:
@@ -29,7 +30,9 @@ its own session, like any program on the network). Figures (target in ``targets`
   clocks, ``--runs`` each: from the controller's SIGKILL / SIGSTOP to the first frame flagged HOLDING, wall
   time, seen by an observer peer subscribing to frames. Targets 20 and 50 ms. ``killed_controller_exit_ms``: from
   the SIGKILL to the process's exit as its parent sees it (its sockets close, and zenoh can see it, only then).
-- ``trip_drop_mrad_max``: ``servotau control --trip-at 0.5 --hold-timeout 12`` on ``servotau sim`` (both clocks):
+- ``trip_drop_mrad_max``: ``servotau control --trip-at 0.5 --hold-timeout 12`` on ``servotau sim`` (``--trip-runs``
+  per clock of ``--clocks``, default 3 each; realtime ones under SCHED_FIFO as for the load runs, and with ordinary
+  scheduling reported apart in ``trip_drop_mrad``, ``--trip-sched``):
   the largest joint motion (encoders, robot log) in the 10 s of robot time after the controller's trip, and,
   reported apart, in the 5 s after the controller's exit (the robot holding alone). Target 10 mrad.
 - ``realtime_torque_runs_completed_under_load_fraction``: ``--load-runs`` runs of ``servotau sim --clock
@@ -47,7 +50,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -76,9 +78,9 @@ from _faults_peers import (  # noqa: E402
     robot_process,
     sim_config_with_faults,
     sim_process,
-    spawn,
     wait_status,
 )
+from _faults_runs import SETTLE, bench_load, bench_trip  # noqa: E402
 
 from servotau.hal import ZenohBackend  # noqa: E402
 from servotau.hal.log import read_log  # noqa: E402
@@ -91,7 +93,6 @@ TARGETS = {"takeover_commands_applied": ("==", 0), "fuzz_applied": ("==", 0), "s
            "trip_drop_mrad_max": ("<=", 10.0), "realtime_torque_runs_completed_under_load_fraction": ("==", 1.0)}
 PARTS = ("takeover", "fuzz", "stale", "creep", "nan", "hold", "trip", "load")
 SIM_CONFIG = ROOT / "config" / "sim.toml"
-SETTLE = 0.5  # [s] the controller's settle phase (control/loop.py SETTLE)
 
 
 # ---------------------------------------------------------------------------------------------- takeover
@@ -363,113 +364,6 @@ def bench_hold(tmp: Path, runs: int) -> dict:
             "kill_hold_after_exit_ms": [h - g for h, g in zip(kills, gone, strict=False) if h is not None]}
 
 
-# ---------------------------------------------------------------------------------------------- trip
-
-def _motion_mrad(c: dict, names, t_from: float, t_to: float) -> float:
-    q = np.column_stack([c[f"q/{n}"] for n in names])
-    t = c["t"]
-    i0 = int(np.searchsorted(t, t_from))
-    win = q[i0:int(np.searchsorted(t, t_to))]
-    return float(np.nanmax(np.abs(win - q[i0]))) * 1e3 if len(win) else float("nan")
-
-
-def _trip_run(tmp: Path, clock: str, trip_at: float = 0.5, window: float = 10.0, after_exit: float = 5.0) -> dict:
-    rlog, clog = tmp / f"trip-{clock}-robot.parquet", tmp / f"trip-{clock}-ctl.parquet"
-    with sim_process(tmp, clock=clock, log=rlog) as (_, port):
-        obs = Peer("hrp2", f"tcp/127.0.0.1:{port}")
-        try:
-            ctl = control_process(tmp, port, "--trip-at", str(trip_at), "--hold-timeout", "12", "--log", str(clog),
-                                  tag=f"trip-{clock}")
-            try:
-                code = ctl.wait(180)
-            finally:
-                kill_group(ctl)
-            t_exit = obs.newest[1]
-            obs.wait(lambda p: p.newest[1] >= t_exit + after_exit, 60.0)
-        finally:
-            obs.close()
-    names = [n for n in read_log(rlog)[0].joint_names]
-    _, c = read_log(rlog)
-    _, cc = read_log(clog)
-    text = (tmp / f"trip-{clock}-{port}.out").read_text()
-    said = re.search(r"safety trip \[command_error\].* at t = ([0-9.]+) s", text)
-    t_trip = float(said.group(1)) if said else float(cc["t"][0]) + SETTLE + trip_at  # as the controller reports it
-    r = {"clock": clock, "controller_exit_code": code, "trip_robot_time_s": t_trip,
-         "drop_mrad": _motion_mrad(c, names, t_trip, t_trip + window),
-         "drift_after_100ms_mrad": _motion_mrad(c, names, t_trip + 0.1, t_trip + window),
-         "after_exit_mrad": _motion_mrad(c, names, t_exit, t_exit + after_exit),
-         "servo_off_ticks": int((c["hal/state"] == 3.0).sum())}
-    progress(f"trip: {r}")
-    return r
-
-
-def bench_trip(tmp: Path, quick: bool) -> dict:
-    runs = [_trip_run(tmp, c) for c in (("lockstep",) if quick else ("lockstep", "realtime"))]
-    return {"trip_drop_mrad_max": max(r["drop_mrad"] for r in runs),
-            "trip_drop_after_exit_mrad_max": max(r["after_exit_mrad"] for r in runs), "trip_runs": runs}
-
-
-# ---------------------------------------------------------------------------------------------- load
-
-def realtime_hal(tmp: Path, base: Path, robot_priority: int = 60, controller_priority: int = 50) -> Path:
-    """A copy of ``base`` (a hal.toml) with SCHED_FIFO ``realtime_priority`` for the robot ([hal.server]) and the
-    controller ([hal.zenoh]): how docs/real_backend.md says to run a realtime loop on a loaded machine."""
-    lines = []
-    for line in base.read_text().splitlines():
-        lines.append(line)
-        if line.startswith("[hal.zenoh]"):
-            lines.append(f"realtime_priority = {controller_priority}")
-        elif line.startswith("[hal.server]"):
-            lines.append(f"realtime_priority = {robot_priority}")
-    out = tmp / "hal-realtime.toml"
-    out.write_text("\n".join(lines) + "\n")
-    return out
-
-
-def _load_runs(tmp: Path, runs: int, hal: Path | None, tag: str) -> list[dict]:
-    results = []
-    for i in range(runs):
-        with sim_process(tmp, clock="realtime", hal=hal) as (_, port):
-            ctl = control_process(tmp, port, "--mode", "torque", "--hold-timeout", "1", tag=f"{tag}-{i}", hal=hal)
-            try:
-                code = ctl.wait(180)
-            finally:
-                kill_group(ctl)
-        out = (tmp / f"{tag}-{i}-{port}.out").read_text().splitlines()
-        first = next((line for line in out if " ticks, " in line and "frames skipped in" in line),
-                     out[-1] if out else "")
-        trip = next((line for line in out if line.startswith("SAFETY TRIP")), None)
-        fifo = [(tmp / f"{w}-{port}.out").read_text().count("SCHED_FIFO priority") > 0
-                for w in ("sim", f"{tag}-{i}")]
-        results.append({"exit_code": code, "summary": first[:300], "trip": trip and trip[:200],
-                        "sched_fifo_robot_controller": fifo, "loadavg_1min": os.getloadavg()[0]})
-        progress(f"{tag} run {i}: exit {code}: {first[:200]}")
-    return results
-
-
-def bench_load(tmp: Path, runs: int, hal: Path | None, busy: int = 4, ordinary_runs: int = 0) -> dict:
-    """``runs`` realtime torque runs with ``busy`` busy loops, robot and controller under SCHED_FIFO (``hal``:
-    the controller's and robot's hal.toml, default :func:`realtime_hal` of config/hal.toml); then
-    ``ordinary_runs`` with ordinary scheduling (config/hal.toml as shipped), reported apart."""
-    hal = hal or realtime_hal(tmp, ROOT / "config" / "hal.toml")
-    loads = [spawn(["sh", "-c", "while :; do :; done"], tmp / f"busy-{i}.out") for i in range(busy)]
-    try:
-        time.sleep(1.0)
-        results = _load_runs(tmp, runs, hal, "load")
-        ordinary = _load_runs(tmp, ordinary_runs, None, "load-ordinary")
-    finally:
-        for p in loads:
-            kill_group(p, signal.SIGKILL)
-    done = sum(r["exit_code"] == 0 for r in results)
-    out = {"realtime_torque_runs_completed_under_load_fraction": done / max(len(results), 1),
-           "load_runs": results, "load_busy_processes": busy, "load_hal": str(hal),
-           "load_sched_fifo_in_effect": all(all(r["sched_fifo_robot_controller"]) for r in results)}
-    if ordinary:
-        out["load_ordinary_scheduling_completed_fraction"] = sum(r["exit_code"] == 0 for r in ordinary) / len(ordinary)
-        out["load_ordinary_runs"] = ordinary
-    return out
-
-
 # ---------------------------------------------------------------------------------------------- main
 
 def _met(key: str, value) -> bool | None:
@@ -486,6 +380,12 @@ def main() -> int:
     p.add_argument("--only", default=",".join(PARTS), help=f"comma-separated parts of {PARTS}")
     p.add_argument("--fuzz", type=int, help="malformed commands (default 20000; quick 200)")
     p.add_argument("--runs", type=int, help="hold-latency runs per clock and fault (default 5; quick 1)")
+    p.add_argument("--trip-runs", type=int, help="controller-trip runs per clock (default 3; quick 1)")
+    p.add_argument("--clocks", default="lockstep,realtime",
+                   help="clock modes of the trip runs (default lockstep,realtime; quick lockstep)")
+    p.add_argument("--trip-sched", choices=("fifo", "ordinary", "both"), default="both",
+                   help="scheduling of the realtime trip runs: fifo (SCHED_FIFO, as docs/real_backend.md asks of a "
+                   "realtime loop), ordinary, or both (default: the figure from fifo, ordinary reported apart)")
     p.add_argument("--load-runs", type=int, help="realtime torque runs under load (default 5; quick 1)")
     p.add_argument("--load-hal", help="hal.toml of the robot and controller in the load runs (default: "
                    "config/hal.toml with SCHED_FIFO realtime_priority for both)")
@@ -498,8 +398,12 @@ def main() -> int:
     if unknown := set(parts) - set(PARTS):
         p.error(f"--only {a.only}: unknown parts {sorted(unknown)}; expected some of {PARTS}")
     q = a.quick
+    clocks = tuple(x for x in a.clocks.split(",") if x) if not q or "--clocks" in sys.argv else ("lockstep",)
+    if not clocks or set(clocks) - {"lockstep", "realtime"}:
+        p.error(f"--clocks {a.clocks}: expected lockstep, realtime or both, comma-separated")
     config = {"quick": q, "parts": parts, "fuzz": a.fuzz or (200 if q else 20_000),
-              "runs": a.runs or (1 if q else 5), "load_runs": a.load_runs or (1 if q else 5),
+              "runs": a.runs or (1 if q else 5), "trip_runs": a.trip_runs or (1 if q else 3),
+              "trip_clocks": list(clocks), "trip_sched": a.trip_sched, "load_runs": a.load_runs or (1 if q else 5),
               "takeover_ticks": 100 if q else 1000, "tls": not (a.no_tls or q), "creep_ticks": 100 if q else 600,
               "load_hal": a.load_hal or "config/hal.toml + realtime_priority",
               "load_ordinary_runs": a.load_ordinary_runs if a.load_ordinary_runs is not None else (0 if q else 3)}
@@ -515,7 +419,7 @@ def main() -> int:
                  "creep": lambda: bench_creep(tmp, config["creep_ticks"]),
                  "nan": lambda: bench_nan(tmp, q),
                  "hold": lambda: bench_hold(tmp, config["runs"]),
-                 "trip": lambda: bench_trip(tmp, q),
+                 "trip": lambda: bench_trip(tmp, clocks, config["trip_runs"], a.trip_sched),
                  "load": lambda: bench_load(tmp, config["load_runs"], Path(a.load_hal) if a.load_hal else None,
                                             ordinary_runs=config["load_ordinary_runs"])}
         for part in PARTS:

@@ -224,6 +224,7 @@ class ControlLoop:
         backend, manager, estimator, hooks = self.backend, self.manager, self.estimator, self.hooks
         names, dt, n_settle = self.info.joint_names, self.info.period, self.settle_ticks
         truth_wanted = any(h.wants_truth for h in hooks)
+        set_hold = getattr(backend, "set_hold", None)  # a HAL backend: the robot holds by itself once tripped
         if truth_wanted:  # before the first write: a backend that keeps truth per step (inprocess) starts keeping it
             backend.ground_truth()
         clock = time.perf_counter_ns
@@ -298,6 +299,8 @@ class ControlLoop:
                 off = getattr(backend, "robot_state", None) == "servo_off"  # a robot-side trip
                 tick.terms = terms = manager.tick(frame, estimate, tick.reference, off)  # estimate used only if valid
                 tick.control_ns = clock() - t0
+                if set_hold is not None:
+                    set_hold(manager.tripped)  # COMMAND_HOLD on every command while tripped (docs/protocol.md)
                 backend.write(dict(zip(names, terms.q_des, strict=True)))
                 if truth_wanted:
                     tick.truth = backend.ground_truth()

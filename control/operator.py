@@ -28,7 +28,11 @@ import json
 import threading
 from dataclasses import asdict, dataclass
 
+from servotau.hal.errors import MalformedMessage
+from servotau.hal.wire.operator import parse_request as _parse
+
 ACTIONS: tuple[str, ...] = ("reset", "release", "status", "position", "torque", "start", "stop")
+ARGUMENTS = {"start": ("task",)}  # the keys an action takes besides "action"
 STATES: tuple[str, ...] = ("starting", "settling", "running", "tripped", "holding", "stopping", "released", "stopped",
                            "done")
 
@@ -48,21 +52,16 @@ class OperatorAnswer:
 
 
 def parse_request(payload: bytes | str | None) -> tuple[str, dict]:
-    """The action and the arguments of a JSON request ``{"action": one of ACTIONS, ...}`` (``start``: ``task``).
+    """The action and the arguments of a JSON request ``{"action": one of ACTIONS, ...}`` (``start``: ``task``), in
+    the operator format of the robot's own queryable (:func:`servotau.hal.wire.operator.parse_request`).
 
     Raises:
-        ValueError: Not such a JSON object (the message names the field and the expected values).
+        MalformedMessage: Not such a JSON object (the message names the field and the expected values).
     """
-    try:
-        body = json.loads(payload or b"{}")
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ValueError(f'request is not JSON ({exc}): expected {{"action": one of {list(ACTIONS)}}}') from None
-    action = body.get("action") if isinstance(body, dict) else None
-    if action not in ACTIONS:
-        raise ValueError(f"action = {action!r}: expected one of {list(ACTIONS)}")
-    args = {k: v for k, v in body.items() if k != "action"}
+    action, args = _parse(payload, ACTIONS, ARGUMENTS)
     if action == "start" and not (isinstance(args.get("task"), str) and args["task"]):
-        raise ValueError(f"task = {args.get('task')!r}: expected a task name, file or module:attribute with start")
+        raise MalformedMessage(f"task = {args.get('task')!r}: expected a task name, file or module:attribute with "
+                               "start")
     return action, args
 
 
@@ -123,7 +122,7 @@ class OperatorChannel:
         """Answer a JSON request (see :func:`parse_request`); a malformed one is refused, naming the field."""
         try:
             action, args = parse_request(payload)
-        except ValueError as exc:
+        except MalformedMessage as exc:
             return self._answer(False, str(exc))
         return self.request(action, timeout, **args)
 

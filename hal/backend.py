@@ -82,6 +82,7 @@ class Backend(ABC):
         self._last_read: SensorFrame | None = None  # last frame returned by read()
         self._answer: SensorFrame = first_frame  # the frame the next write() answers
         self.commands_sent = 0
+        self.hold_requested = False  # every command carries the hold flag (set_hold)
         self._closed = False
 
     # -- reading ------------------------------------------------------------------------------------
@@ -120,9 +121,17 @@ class Backend(ABC):
         self._q_des = q_des
         self.commands_sent += 1
 
+    def set_hold(self, on: bool) -> None:
+        """From the next command on, ask the robot to hold (``on``: the controller has tripped) or not: every
+        command carries the COMMAND_HOLD flag while it is on, and the robot's firmware brakes and holds from its
+        own measurements at once, without waiting for the controller's held q_des to arrive (docs/protocol.md
+        "State machine"). The controller sets it on every tick from its latched trip."""
+        self.hold_requested = bool(on)
+
     @abstractmethod
     def _send(self, q_des: np.ndarray, answers: SensorFrame) -> None:
-        """Transmit a validated full command answering frame ``answers``."""
+        """Transmit a validated full command answering frame ``answers`` (with the hold flag if
+        :attr:`hold_requested`)."""
 
     @property
     def q_des(self) -> np.ndarray:

@@ -25,6 +25,11 @@ class ClaimRefused(HalError, PermissionError):
     """The robot is claimed by another controller (one at a time): the message names the holder."""
 
 
+class ClaimUnseen(ClaimRefused):
+    """The robot refused a claim because it could not see the claiming session yet (through a router, the session's
+    liveliness token may arrive after the claim): worth a retry (hal/robot/claim.py ``claim_with_retry``)."""
+
+
 class RobotServoOff(HalError):
     """The robot's servos are off (latched) at connect: an operator must reset it first."""
 
@@ -33,5 +38,5 @@ class EndOfLog(HalError, EOFError):
     """A replayed log has no more frames."""
 
 
-__all__ = ["ClaimRefused", "EndOfLog", "HalError", "HalTimeoutError", "MalformedMessage", "ProtocolVersionMismatch",
-           "RobotLost", "RobotServoOff"]
+__all__ = ["ClaimRefused", "ClaimUnseen", "EndOfLog", "HalError", "HalTimeoutError", "MalformedMessage",
+           "ProtocolVersionMismatch", "RobotLost", "RobotServoOff"]

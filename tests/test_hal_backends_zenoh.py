@@ -114,3 +114,17 @@ def test_a_malformed_frame_fails_this_and_every_later_read():
                     b.read(timeout=2.0)
     finally:
         peer.close()
+
+
+def test_the_first_frame_has_its_ground_truth(fake_zenoh):
+    """The robot published frame 0 and its truth before this controller subscribed: it sends frame 0's truth again
+    once somebody subscribes and with every republished frame, so the controller's first logged truth row is valid
+    (not NaN)."""
+    b = fake_zenoh
+    f = b.read()
+    b.write({})
+    truth = b.ground_truth(wait=1.0)
+    assert f.seq == 0 and truth is not None and truth.seq == 0 and np.isfinite(truth.q).all()
+    f = b.read()
+    b.write({})
+    assert b.ground_truth(wait=1.0).seq == f.seq == 1

@@ -28,8 +28,9 @@ def test_waits_holding_the_first_position_without_timeout():
 
 
 def test_watchdog_holds_then_cuts_servos_latched():
-    """No fresh command: hold the measured position after hold_after, servo off after servo_off_after."""
-    fw = Firmware(INFO, SafetyConfig(hold_after=0.05, servo_off_after=0.2, **FAST))
+    """No fresh command: hold the measured position after hold_after, servo off after servo_off_after (without
+    braking: exactly the measured position)."""
+    fw = Firmware(INFO, SafetyConfig(hold_after=0.05, servo_off_after=0.2, hold_damping=0.0, **FAST))
     fw.accept(Q + 0.02, 0.0)
     np.testing.assert_array_equal(fw.output(Q, 0.04), Q + 0.02)
     held = fw.output(Q + 0.01, 0.06)  # measured position at the trip

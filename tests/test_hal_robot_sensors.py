@@ -137,9 +137,9 @@ def test_reset_of_a_position_error_trip():
     (None, "empty request"),
     (b"", "empty request"),
     (b"\xff\xfe", "not JSON"),
-    (b"[1, 2]", 'single key "action"'),
-    (json.dumps({"action": "reset", "x": 1}).encode(), 'single key "action"'),
-    (json.dumps({"action": "explode"}).encode(), "action 'explode': expected one of ['reset']"),
+    (b"[1, 2]", 'with the key "action"'),
+    (json.dumps({"action": "reset", "x": 1}).encode(), "request keys ['x'] with action 'reset'"),
+    (json.dumps({"action": "explode"}).encode(), "action = 'explode': expected one of ['reset']"),
     (b"{" * 5000, "at most 4096"),
 ])
 def test_bad_operator_requests_are_answered_with_an_error(payload, error):

@@ -36,7 +36,7 @@ def command(seq=0, time=0.0, q=None, flags=0, n_joints=NQ, n_ft=0, n_values=None
 
 @pytest.mark.parametrize(("buf", "reason"), [
     (command(flags=0xFFFF), "flags"),
-    (command(flags=1), "flags"),
+    (command(flags=2), "flags"),  # 1 is COMMAND_HOLD
     (command(version=2), "version"),
     (command(magic=b"XXXX"), "header"),
     (command(mtype=MsgType.FRAME), "header"),
@@ -121,7 +121,7 @@ def fuzz(rng: np.random.Generator, n: int, f_seq: int, f_time: float) -> list[by
         elif kind == 1:
             p = good[: int(rng.integers(0, len(good)))]
         elif kind == 2:
-            p = command(f_seq, f_time, flags=int(rng.integers(1, 2**16)))
+            p = command(f_seq, f_time, flags=int(rng.integers(1, 2**15)) << 1)  # a bit beyond COMMAND_HOLD
         elif kind == 3:
             p = command(f_seq, f_time + float(rng.uniform(1e-6, 1.0)) * rng.choice([-1, 1]))
         elif kind == 4:
@@ -136,6 +136,8 @@ def fuzz(rng: np.random.Generator, n: int, f_seq: int, f_time: float) -> list[by
             b = bytearray(good)
             k = int(rng.integers(0, 8))  # magic, version, type, flags
             b[k] = (b[k] + int(rng.integers(1, 256))) % 256
+            if k == 6 and b[k] == 1:  # COMMAND_HOLD alone is a valid command
+                b[k] = 3
             p = bytes(b)
         out.append(p)
     return out

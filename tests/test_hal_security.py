@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zenoh
 from support.hal import free_port
 
 from servotau.apps.certs import CONTROLLER_CN, make_certs
@@ -23,6 +24,7 @@ from servotau.config import Section
 from servotau.errors import ConfigError, HalError
 from servotau.hal import ZenohBackend, keys
 from servotau.hal.errors import ClaimRefused, RobotServoOff
+from servotau.hal.robot.claim import claim_request
 from servotau.hal.robot.config import ServerConfig
 from servotau.hal.robot.firmware import SafetyConfig
 from servotau.hal.robot.server import RobotServer
@@ -81,7 +83,9 @@ def _raw_commands(session: Session, n: int, *, attachment: bytes | None = None, 
 
 def test_tls_and_access_control_only_the_controller_identity_drives(certs):
     """Mutual TLS + access control: an authenticated peer of another identity (a viewer) may read frames but its
-    commands and its claim never reach the robot (none applied); the controller's identity claims and drives."""
+    commands and its claim never reach the robot (none applied), even a claim spoofing the zid of another live
+    session, in the payload and in the query's source_info (zenoh lets the querier fill that in); the controller's
+    identity claims and drives."""
     port = free_port()
     ep = f"tls/127.0.0.1:{port}"
     roles = (AccessRole("controller", ("command", "claim", "operator", "observe"), cert_common_names=(CONTROLLER_CN,)),
@@ -89,17 +93,21 @@ def test_tls_and_access_control_only_the_controller_identity_drives(certs):
     robot_sec = Security(tls=_tls(certs.robot, certs), access=roles)
     with serving(ServerConfig(listen=(ep,), security=robot_sec)) as server:
         viewer = Session(zenoh_config(connect=[ep], security=Security(tls=_tls(certs.clients[0], certs))))
+        other = Session(zenoh_config(connect=[ep], security=Security(tls=_tls(certs.clients[0], certs))))
         try:
             frames = viewer.z.declare_subscriber(keys("fake").frame)
             _wait(lambda: frames.try_recv() is not None or server.status()["ticks"] > 0)
             _raw_commands(viewer, 50, matched=False)
-            claim = list(viewer.z.get(f"{keys('fake').prefix}/claim", payload=b'{"op": "claim", "zid": "1"}',
-                                      timeout=1.0))
+            spoof = claim_request(str(other.z.zid()), "h", 1, "u")  # a live session with a transport to the robot
+            claim = list(viewer.z.get(f"{keys('fake').prefix}/claim", payload=spoof, timeout=1.0,
+                                      source_info=zenoh.SourceInfo(other.z.id, 0)))
             status = json.loads(next(iter(viewer.z.get(keys("fake").status, timeout=2.0))).ok.payload.to_bytes())
             frames.undeclare()
         finally:
             viewer.close()
+            other.close()
         assert claim == []  # the access control dropped the claim query
+        assert server.status()["claims_refused"] == 0 and server.status()["claim_holder"] is None  # never reached
         assert status["ticks"] == 0 and status["commands_accepted"] == 0 and status["state"] == "WAITING"
         assert status["commands_not_claimer"] == 0 and status["commands_rejected"] == 0  # never reached the robot
         t0 = time.monotonic()
@@ -379,3 +387,37 @@ def test_loopback_endpoints(endpoint, loopback):
     from servotau.hal.wire.security import is_loopback
 
     assert is_loopback(endpoint) is loopback
+
+
+def test_a_claim_the_robot_cannot_yet_watch_is_retried_a_bounded_number_of_times():
+    """Through a router the claimer's token may reach the robot after its claim: the controller claims again (the
+    robot's real ClaimTable answers), and after CLAIM_ATTEMPTS refusals it gives up naming the cause; any other
+    refusal is not retried."""
+    from servotau.hal.errors import ClaimUnseen
+    from servotau.hal.robot.claim import CLAIM_ATTEMPTS, ClaimTable, claim_request, claim_with_retry
+
+    zid, request = "a1b2c3d4e5f60718", claim_request("a1b2c3d4e5f60718", "ctl", 1, "op")
+    for seen_after in (2, None):  # the token arrives before the third claim; never
+        table, tokens, asked, waits = ClaimTable(), set(), [], []
+
+        def ask(timeout, table=table, tokens=tokens, asked=asked, seen_after=seen_after):
+            asked.append(timeout)
+            if len(asked) > (seen_after if seen_after is not None else 99):
+                tokens.add(zid)
+            return table.handle(request, {}, tokens, 0.0)[0]
+
+        if seen_after is not None:
+            token = claim_with_retry(ask, "fake", 1.0, sleep=waits.append)
+            assert token == table.token and len(asked) == 3 and waits == [0.02, 0.04]
+        else:
+            with pytest.raises(ClaimRefused, match=f"{CLAIM_ATTEMPTS} claims over .*router forwards liveliness") as e:
+                claim_with_retry(ask, "fake", 1.0, sleep=waits.append)
+            assert not isinstance(e.value, ClaimUnseen) and len(asked) == CLAIM_ATTEMPTS
+            assert table.holder is None and table.claims_refused == CLAIM_ATTEMPTS
+    held = ClaimTable()
+    held.handle(claim_request("99887766554433aa", "other", 2, "x"), {"99887766554433aa": None}, set(), 0.0)
+    asked = []
+    with pytest.raises(ClaimRefused, match="already controlled"):
+        claim_with_retry(lambda t: asked.append(t) or held.handle(request, {zid: None}, set(), 1.0)[0], "fake", 1.0)
+    assert len(asked) == 1  # held by another controller: no retry
+    assert claim_with_retry(lambda t: None, "fake", 1.0) is None  # no answer: the caller's timeout error

@@ -80,16 +80,16 @@ class InProcessBackend(Backend):
         return self._returned(self._current)
 
     def _send(self, q_des: np.ndarray, answers: SensorFrame) -> None:
-        self._take(answers.seq, answers.time, q_des)
+        self._take(answers.seq, answers.time, q_des, self.hold_requested)
 
-    def _take(self, seq: int, time: float, q_des: np.ndarray) -> str:
+    def _take(self, seq: int, time: float, q_des: np.ndarray, hold: bool = False) -> str:
         verdict, why = self.gate.check(seq, time)
         if verdict == STALE:
             self.firmware.stale()
         elif verdict != TAKE:
             self.firmware.reject(verdict, why)
         else:
-            self.firmware.accept(q_des, self._current.time)
+            self.firmware.accept(q_des, self._current.time, hold, self.gate.newest - seq)
             self.gate.applied(seq)
             self._step()
         return verdict
@@ -98,12 +98,12 @@ class InProcessBackend(Backend):
         """Take a command as wire bytes, checked as the server checks them (docs/protocol.md
         "Validation"): the verdict, "take", "stale" or the reason it was rejected (gate.REJECT_REASONS)."""
         try:
-            seq, time, q_des = decode_command(payload, self.info.joint_names)
+            seq, time, q_des, hold = decode_command(payload, self.info.joint_names)
         except MalformedMessage as exc:
             reason = reject_reason(exc)
             self.firmware.reject(reason, str(exc))
             return reason
-        return self._take(seq, time, np.array(q_des))
+        return self._take(seq, time, np.array(q_des), hold)
 
     def operator(self, request: dict | bytes) -> dict:
         """Answer an operator request (``{"action": "reset"}``) as the server's ``.../operator`` does."""

@@ -23,7 +23,7 @@ from servotau.config import Section, check_settings, load_dataclass, setting
 from ..backend import Backend
 from ..config import endpoint_list, with_override
 from ..errors import HalError, HalTimeoutError, MalformedMessage, RobotLost, RobotServoOff
-from ..robot.claim import claim_key, claim_reply, claim_request, release_request, token_key
+from ..robot.claim import claim_key, claim_request, claim_with_retry, release_request, token_key
 from ..robot.realtime import set_realtime_priority
 from ..types import GroundTruth, SensorFrame
 from ..wire.protocol import (
@@ -156,9 +156,9 @@ class ZenohBackend(Backend):
         # the claiming session's own token first: the robot sees this session go even through a router
         s.keep(z.liveliness().declare_token(token_key(k.alive_controller, str(z.zid()))))
         self._token = self._claim(max(deadline - time.monotonic(), 0.5))
-        self._frames = s.keep(z.declare_subscriber(k.frame, zenoh.handlers.RingChannel(_FRAMES_KEPT)))
-        if self._want_truth:
+        if self._want_truth:  # first: the robot then knows it is wanted before this session sees a frame
             s.keep(z.declare_subscriber(k.truth, callback(self._on_truth)))
+        self._frames = s.keep(z.declare_subscriber(k.frame, zenoh.handlers.RingChannel(_FRAMES_KEPT)))
         self._pub = s.keep(z.declare_publisher(k.command, express=True,
                                                congestion_control=zenoh.CongestionControl.BLOCK,
                                                priority=zenoh.Priority.REAL_TIME))
@@ -176,9 +176,16 @@ class ZenohBackend(Backend):
         """Claim the robot (hal/robot/claim.py): its token, or ClaimRefused naming the holder."""
         z = self._session.z
         request = claim_request(str(z.zid()), socket.gethostname(), os.getpid(), getpass.getuser())
-        for r in z.get(claim_key(self.keys.prefix), payload=request, timeout=timeout):
-            if r.ok is not None:
-                return claim_reply(r.ok.payload.to_bytes(), self.robot_name)
+
+        def ask(t: float) -> bytes | None:
+            for r in z.get(claim_key(self.keys.prefix), payload=request, timeout=t):
+                if r.ok is not None:
+                    return r.ok.payload.to_bytes()
+            return None
+
+        token = claim_with_retry(ask, self.robot_name, timeout)
+        if token is not None:
+            return token
         raise HalTimeoutError(f'robot "{self.robot_name}" did not answer the claim on {claim_key(self.keys.prefix)} '
                               f"within {timeout} s: an older robot process, or its access control does not let "
                               "this identity claim it (see [hal.server.access])")
@@ -315,7 +322,7 @@ class ZenohBackend(Backend):
         if self._error is not None:
             raise self._error
         self._min_seq = max(self._min_seq, answers.seq)
-        self._pub.put(encode_command(answers.seq, answers.time, q_des), attachment=self._token)
+        self._pub.put(encode_command(answers.seq, answers.time, q_des, self.hold_requested), attachment=self._token)
 
     def ground_truth(self, wait: float = 0.005) -> GroundTruth | None:
         """Ground truth of the tick of the last frame read (waits up to ``wait`` [s] for it to arrive;

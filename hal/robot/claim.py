@@ -17,17 +17,19 @@ import hmac
 import json
 import os
 import re
-from collections.abc import Collection, Mapping
+import time
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass
 
-from ..errors import ClaimRefused, MalformedMessage
+from ..errors import ClaimRefused, ClaimUnseen, MalformedMessage
 
-__all__ = ["Claimant", "ClaimTable", "claim_key", "claim_reply", "claim_request", "release_request",
-           "token_key"]
+__all__ = ["CLAIM_ATTEMPTS", "Claimant", "ClaimTable", "claim_key", "claim_reply", "claim_request",
+           "claim_with_retry", "release_request", "token_key"]
 
 TOKEN_BYTES = 16
 _ZID = re.compile(r"^[0-9a-f]{1,32}$")
 _MAX_REQUEST = 4096  # [bytes]
+CLAIM_ATTEMPTS = 5  # claims a controller sends before it gives up on a robot that cannot see its session yet
 
 
 def claim_key(prefix: str) -> str:
@@ -94,13 +96,39 @@ def claim_reply(buf: bytes, robot: str) -> bytes:
         if r.get("granted"):
             return bytes.fromhex(r["token"])
         if "error" in r:
-            raise ClaimRefused(f'robot "{robot}" refused the claim: {r["error"]}')
+            raise (ClaimUnseen if r.get("retry") else ClaimRefused)(f'robot "{robot}" refused the claim: {r["error"]}')
         holder, since = Claimant(**r["holder"]), float(r["since_s"])
     except (ValueError, TypeError, KeyError, AttributeError) as exc:
         raise MalformedMessage(f'robot "{robot}" answered the claim with {buf[:200]!r}: {exc}') from None
     raise ClaimRefused(f'robot "{robot}" is already controlled by {holder.describe()} (claimed {since:.1f} s ago): '
                        "one controller at a time. Stop that controller (its claim ends with its session, "
                        "at once if it is killed), then connect again.")
+
+
+def claim_with_retry(ask: Callable[[float], bytes | None], robot: str, timeout: float,
+                     attempts: int = CLAIM_ATTEMPTS, delay: float = 0.02,
+                     sleep: Callable[[float], None] = time.sleep) -> bytes | None:
+    """Claim with ``ask(timeout [s])`` (sends the claim query: the reply's bytes, or None without an answer) and return
+    the token, or None if the robot did not answer. A claim refused only because the robot could not see this
+    session yet (:class:`ClaimUnseen`: through a router, the session's token can reach the robot after the claim) is
+    sent again, at most ``attempts`` times in all, waiting ``delay`` [s], doubling, in between, within ``timeout``;
+    then :class:`ClaimRefused` says so. Any other refusal is raised at once."""
+    t0 = time.monotonic()
+    deadline = t0 + timeout
+    for i in range(attempts):
+        reply = ask(max(deadline - time.monotonic(), 0.1))
+        if reply is None:
+            return None
+        try:
+            return claim_reply(reply, robot)
+        except ClaimUnseen as exc:
+            last = exc
+        if i + 1 < attempts:
+            sleep(max(min(delay * 2 ** i, deadline - time.monotonic()), 0.0))
+    raise ClaimRefused(f"{last} ({attempts} claims over {time.monotonic() - t0:.2f} s). Through a router the robot "
+                       "sees this session only by its alive/controller/<zid> token: check that the router forwards "
+                       "liveliness tokens and that its access control lets this identity declare it (may = "
+                       '["command"]).')
 
 
 class ClaimTable:
@@ -111,7 +139,6 @@ class ClaimTable:
         self.token: bytes | None = None
         self.since = 0.0  # time.monotonic() [s] of the grant
         self.claims_refused = 0
-        self.commands_not_claimer = 0  # commands without the holder's token (or with no claim held)
 
     def handle(self, buf: bytes, links: Mapping[str, str | None], tokens: Collection[str] | None,
                now: float) -> tuple[bytes, str | None]:
@@ -137,7 +164,8 @@ class ClaimTable:
                                "since_s": now - self.since}).encode(), None
         if self.holder is None and tokens is not None and zid not in links and zid not in tokens:
             self.claims_refused += 1
-            return json.dumps({"granted": False, "error": f"session {zid} has neither a transport to the robot nor "
+            return json.dumps({"granted": False, "retry": True,
+                               "error": f"session {zid} has neither a transport to the robot nor "
                                "its alive/controller/<zid> token: declare the token, then claim"}).encode(), None
         self.holder = Claimant(zid, req.get("host", "?"), req.get("pid", 0), req.get("user", "?"), links.get(zid))
         self.token, self.since = os.urandom(TOKEN_BYTES), now
@@ -157,14 +185,11 @@ class ClaimTable:
         return True
 
     def allows(self, attachment: bytes | None) -> bool:
-        """Whether a command with this attachment comes from the holder (counted otherwise)."""
-        ok = self.token is not None and attachment is not None and hmac.compare_digest(attachment, self.token)
-        if not ok:
-            self.commands_not_claimer += 1
-        return ok
+        """Whether a command with this attachment comes from the holder (the firmware counts the others, rejected
+        as ``not_claimer``: ``commands_not_claimer`` on ``.../status``)."""
+        return self.token is not None and attachment is not None and hmac.compare_digest(attachment, self.token)
 
     def status(self) -> dict:
-        """JSON-ready: who holds the claim, since when, the refused claims and commands."""
+        """JSON-ready: who holds the claim and the refused claims."""
         holder = self.holder
-        return {"claim_holder": holder.describe() if holder else None,
-                "claims_refused": self.claims_refused, "commands_not_claimer": self.commands_not_claimer}
+        return {"claim_holder": holder.describe() if holder else None, "claims_refused": self.claims_refused}

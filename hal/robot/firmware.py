@@ -11,10 +11,13 @@ the servos, or ``None`` once the servos are cut. States (``FLAG_*`` in every fra
 - HOLDING: hold a position, indefinitely while the encoders are valid, entered when
   no fresh command came for ``hold_after`` [s] (``lockstep_hold_after`` in lock-step) or the claim ended
   (the claimer's session closed or it released: ``hold_reason``), a command broke a rate limit with
-  ``limit_action = "trip"``, or the encoders went invalid or stale (FLAG_SENSOR_FAULT: hold their last valid
-  reading, per joint; commands are not applied). A fresh command resumes RUNNING (once the encoders are valid
-  again). In lock-step the server holds for a hung controller without stepping (:meth:`watchdog`; simulated time
-  stands still).
+  ``limit_action = "trip"``, a command carried COMMAND_HOLD (the controller tripped: :attr:`hold_commanded`,
+  held from the measured posture of the frame that command answers), or the encoders went invalid or stale
+  (FLAG_SENSOR_FAULT: hold their last valid reading, per joint; commands are not applied). A hold caught moving
+  brakes for ``hold_brake_time`` (``q_hold - hold_damping * dq``, the firmware's own encoders; not after an encoder
+  fault) and is never rate limited. A fresh command without COMMAND_HOLD resumes RUNNING (once the encoders are
+  valid again); commands with it keep the hold and the watchdog fed. In lock-step the server holds for a hung
+  controller without stepping (:meth:`watchdog`; simulated time stands still).
 - SERVO_OFF (latched) on robot-side faults only: ``|q_des - q| > max_position_error`` on a valid joint (as
   HRP-2 does), encoders invalid for more than ``invalid_encoders_after`` [s] of robot time (ticks x period),
   no valid encoder reading ever, or (if set) no fresh command for ``servo_off_after``. :meth:`reset` (the
@@ -23,8 +26,8 @@ the servos, or ``None`` once the servos are cut. States (``FLAG_*`` in every fra
 
 Transitions, in short (docs/protocol.md "State machine")::
 
-    WAITING --command--> RUNNING --watchdog / controller lost / rate trip / encoders--> HOLDING
-    HOLDING --fresh command, encoders valid--> RUNNING
+    WAITING --command--> RUNNING --watchdog / controller lost / rate trip / COMMAND_HOLD / encoders--> HOLDING
+    HOLDING --fresh command without COMMAND_HOLD, encoders valid--> RUNNING
     any --position error / encoders invalid too long--> SERVO_OFF --operator reset--> WAITING
 
 Commands reach :meth:`accept` only once decoded (hal/wire/protocol.py) and admitted by
@@ -99,7 +102,7 @@ class Firmware:
 
     COUNTERS = ("ticks", "commands_accepted", "commands_stale", "commands_rejected", "commands_rejected_version",
                 "commands_after_servo_off", "commands_during_sensor_fault", "holds", "clamped_ticks",
-                "rate_limited_ticks", "rate_limit_trips", "sensor_fault_ticks", "trips", "resets")
+                "rate_limited_ticks", "rate_limit_trips", "sensor_fault_ticks", "trips", "resets", "hold_commands")
 
     def __init__(self, info: RobotInfo, safety: SafetyConfig | None = None):
         self.info = info
@@ -121,6 +124,14 @@ class Firmware:
         self._t_cmd = -math.inf  # time of the last accepted command [s]
         self._q_hold: np.ndarray | None = None
         self._hold_requested = False
+        self.hold_commanded = False  # holding because the claimer's commands carry COMMAND_HOLD
+        self._hold_age: int | None = None  # a commanded hold starts at the next tick, from this many ticks ago
+        self._brake_ticks: int | None = None  # ticks the hold has braked so far (None: not braking)
+        n = info.nq
+        self._history = np.full((self.safety.max_command_age_ticks + 2, n), np.nan)  # last valid readings [rad]
+        self._n_history = 0  # readings pushed so far
+        self._q_prev = np.full(n, np.nan)  # the previous tick's encoders [rad] (NaN: invalid)
+        self._dq = np.zeros(n)  # [rad/s] their backward difference, within +-max_velocity (0: unknown)
         self._warn = RateLimitedLog(logger, self.safety.warn_interval)
 
     # -- inputs ------------------------------------------------------------------------------------
@@ -135,20 +146,31 @@ class Firmware:
         return (_STATE_FLAGS[self.state] | (FLAG_CLAMPED if self.clamped else 0)
                 | (FLAG_RATE_LIMITED if self.rate_limited else 0) | (FLAG_SENSOR_FAULT if self.sensor_fault else 0))
 
-    def accept(self, q_des: np.ndarray, now: float) -> None:
-        """Take an admitted command (``(nq,)`` finite [rad]) received at ``now`` [s]."""
+    def accept(self, q_des: np.ndarray, now: float, hold: bool = False, age: int = 0) -> None:
+        """Take an admitted command (``(nq,)`` finite [rad]) received at ``now`` [s]. ``hold``: it carries
+        COMMAND_HOLD: hold from the next tick on (``q_des`` is not applied), from the measured posture of the frame
+        it answers, ``age`` ticks older than the newest (the command's latency)."""
         if self.state == FirmwareState.SERVO_OFF:
             self.counters["commands_after_servo_off"] += 1
             return
         if self.sensor_fault:  # holding the last valid reading until the encoders are valid again
             self.counters["commands_during_sensor_fault"] += 1
             return
-        if self.state == FirmwareState.HOLDING:
-            logger.warning("%s: fresh command after a hold: resuming", self.info.name)
-        self._q_cmd, self._t_cmd = q_des, now
-        self.state = FirmwareState.RUNNING
+        self._t_cmd = now
         self._hold_requested = False
         self.counters["commands_accepted"] += 1
+        if hold:
+            self.counters["hold_commands"] += 1
+            if not self.hold_commanded:
+                self.hold_commanded = True
+                if self.state != FirmwareState.HOLDING:  # else keep the hold in force (and its posture)
+                    self._hold_age = max(int(age), 0)
+            return
+        if self.state == FirmwareState.HOLDING:
+            logger.warning("%s: fresh command after a hold: resuming", self.info.name)
+        self._q_cmd = q_des
+        self.state = FirmwareState.RUNNING
+        self.hold_commanded, self._hold_age = False, None
 
     def reject(self, reason: str, message: str = "") -> None:
         """Count a command that is never applied, by ``reason`` (:data:`~.gate.REJECT_REASONS`), and log it
@@ -164,9 +186,11 @@ class Firmware:
         self.counters["commands_stale"] += 1
 
     def controller_lost(self) -> None:
-        """The claim ended (the claimer's session closed, or it released): hold at the next tick without waiting."""
+        """The claim ended (the claimer's session closed, or it released): hold at the next tick without waiting
+        (a commanded hold goes on, no longer commanded)."""
         if self.state == FirmwareState.RUNNING:
             self._hold_requested = True
+        self.hold_commanded = False
 
     # -- the tick ----------------------------------------------------------------------------------
     def last_valid(self, q: np.ndarray) -> np.ndarray:
@@ -187,15 +211,19 @@ class Firmware:
             self._q_valid = np.where(valid, q, np.nan)
         else:
             self._q_valid[valid] = q[valid]
+        self._measure(q, valid)
         if self._sensors(valid.all()) or self.state == FirmwareState.SERVO_OFF:
             return None
+        if self._hold_age is not None:  # a commanded hold begins
+            self._hold("the controller tripped (COMMAND_HOLD)", self._hold_age)
+            self._hold_age = None
         age = now - self._t_cmd
         if not self.watchdog(now) and self.state != FirmwareState.RUNNING and self._q_hold is None:
             self._q_hold = self._q_valid.copy()
         if self.servo_off_due(now):
             return self._trip(f"no fresh command for {age:.3f} s (servo_off_after = {self.safety.servo_off_after} s)")
         running = self.state == FirmwareState.RUNNING
-        target = self._q_cmd if running else self._q_hold
+        target = self._q_cmd if running else self._hold_target()
         if not np.isfinite(target).all():
             return self._trip("no valid encoder reading to hold")
         out = np.clip(target, self.info.q_min, self.info.q_max)
@@ -227,6 +255,9 @@ class Firmware:
         """RUNNING without a fresh command for ``hold_after`` at ``now`` [s] (or with the controller lost):
         hold the last valid reading from now on. True if a hold began (also run by :meth:`output`)."""
         age = now - self._t_cmd
+        if self.hold_commanded and age > self.safety.hold_after:  # the holding controller went silent
+            self.hold_commanded = False
+            self.hold_reason = f"{self.hold_reason}; then no fresh command for {age * 1e3:.0f} ms"
         if self.state != FirmwareState.RUNNING or not (self._hold_requested or age > self.safety.hold_after):
             return False
         self._hold("controller lost" if self._hold_requested else f"no fresh command for {age * 1e3:.0f} ms")
@@ -246,7 +277,7 @@ class Firmware:
         if not self.sensor_fault:
             self.sensor_fault, self._fault_ticks = True, 0
             if self.state == FirmwareState.RUNNING or self._q_hold is None:
-                self._hold("encoders invalid or stale")
+                self._hold("encoders invalid or stale", brake=False)
             else:
                 self.hold_reason = "encoders invalid or stale"
         self._fault_ticks += 1
@@ -257,15 +288,46 @@ class Firmware:
             return True
         return False
 
-    def _hold(self, why: str) -> None:
-        """Hold the last valid reading of each joint from this tick on."""
-        if self.state == FirmwareState.RUNNING:
+    def _hold(self, why: str, age: int = 0, brake: bool = True) -> None:
+        """Hold the last valid reading of each joint from this tick on (``age`` > 0: the valid reading of ``age``
+        ticks ago, within a quarter of ``max_position_error`` of the last one), braking unless ``brake`` is False."""
+        if self.state == FirmwareState.RUNNING or (self.state == FirmwareState.WAITING and self.hold_commanded):
             logger.warning("%s: %s: holding the measured position", self.info.name, why)
             self.state = FirmwareState.HOLDING
             self.counters["holds"] += 1
         self.hold_reason = why
         self._q_hold = None if self._q_valid is None else self._q_valid.copy()
+        if self._q_hold is not None and 0 < age < min(self._n_history, len(self._history)):
+            past = self._history[(self._n_history - 1 - age) % len(self._history)]
+            m = 0.25 * self.max_error
+            self._q_hold += np.where(np.isfinite(past), np.clip(past - self._q_hold, -m, m), 0.0)
+        self._brake_ticks = 0 if brake and self.safety.hold_damping > 0.0 else None
         self._hold_requested = False
+
+    def _measure(self, q: np.ndarray, valid: np.ndarray) -> None:
+        """Record this tick's valid readings (history) and the encoders' velocity (backward difference)."""
+        self._history[self._n_history % len(self._history)] = self._q_valid
+        self._n_history += 1
+        np.subtract(q, self._q_prev, out=self._dq)
+        self._dq /= self.info.period
+        self._dq[~(valid & np.isfinite(self._dq))] = 0.0
+        np.clip(self._dq, -self.limiter.v_max, self.limiter.v_max, out=self._dq)
+        self._q_prev[:] = np.where(valid, q, np.nan)
+
+    def _hold_target(self) -> np.ndarray | None:
+        """This tick's hold: ``q_hold - hold_damping * w * dq`` while braking (``w`` a half-cosine from 1 to 0 over
+        ``hold_brake_time`` of robot time; the term within a quarter of ``max_position_error``), then ``q_hold``."""
+        k, s = self._brake_ticks, self.safety
+        if k is None or self._q_hold is None:
+            return self._q_hold
+        elapsed = k * self.info.period
+        if elapsed >= s.hold_brake_time:
+            self._brake_ticks = None
+            return self._q_hold
+        self._brake_ticks = k + 1
+        w = 0.5 * (1.0 + math.cos(math.pi * elapsed / s.hold_brake_time))
+        m = 0.25 * self.max_error
+        return self._q_hold - np.clip(s.hold_damping * w * self._dq, -m, m)
 
     def _rate_limit(self, out: np.ndarray, q: np.ndarray) -> np.ndarray:
         if self.limiter.q is None:  # the first command ever: from the measured position, at rest
@@ -305,6 +367,7 @@ class Firmware:
         q = np.array(q, dtype=float)
         self.state = FirmwareState.WAITING
         self.servo_off_reason, self.sensor_fault, self._hold_requested = None, False, False
+        self.hold_commanded, self._hold_age, self._brake_ticks = False, None, None
         self._q_valid, self._q_hold, self._q_cmd, self._t_cmd = q.copy(), q, None, -math.inf
         self.limiter.reset(q)
         self.counters["resets"] += 1
@@ -314,5 +377,6 @@ class Firmware:
     def status(self) -> dict:
         """State, reasons and counters, JSON-ready."""
         return {"state": self.state.name, "servo_off_reason": self.servo_off_reason, "trip_reason": self.trip_reason,
-                "hold_reason": self.hold_reason, "sensor_fault": self.sensor_fault,
-                "rejected": dict(self.rejected), **self.counters}
+                "hold_reason": self.hold_reason, "hold_commanded": self.hold_commanded,
+                "sensor_fault": self.sensor_fault,
+                "rejected": dict(self.rejected), "commands_not_claimer": self.rejected["not_claimer"], **self.counters}

@@ -64,3 +64,34 @@ class CommandGate:
         if seq < self.applied_seq or (self.lockstep and seq != self.newest):
             return STALE, f"answers frame {seq}, older than the current one"
         return TAKE, ""
+
+
+class PendingCommand:
+    """Realtime: the newest admitted command received during a tick, applied at its end, and the oldest frame
+    answered by a COMMAND_HOLD command among those received (a controller that fell behind sends several at once:
+    the robot holds the posture of the first one's frame)."""
+
+    def __init__(self):
+        self.clear()
+
+    def clear(self) -> None:
+        self._command: tuple[np.ndarray, float, int, bool] | None = None  # (q_des [rad], received [s], seq, hold)
+        self._hold_seq: int | None = None
+
+    def offer(self, q_des: np.ndarray, received: float, seq: int, hold: bool) -> bool:
+        """A command answering frame ``seq``; False if an already pending one answers a newer frame (stale)."""
+        if hold:
+            self._hold_seq = seq if self._hold_seq is None else min(self._hold_seq, seq)
+        if self._command is not None and seq < self._command[2]:
+            return False
+        self._command = (q_des, received, seq, hold)
+        return True
+
+    def take(self) -> tuple[np.ndarray, float, int, bool, int] | None:
+        """``(q_des, received, seq, hold, first)`` of the newest command, ``first`` the seq the hold starts from (the
+        oldest HOLD command's frame, else ``seq``), and clear; None if none came."""
+        command, hold_seq = self._command, self._hold_seq
+        self.clear()
+        if command is None:
+            return None
+        return (*command, hold_seq if command[3] and hold_seq is not None else command[2])

@@ -11,29 +11,21 @@ import json
 
 import numpy as np
 
+from ..errors import MalformedMessage
 from ..types import SensorFrame
+from ..wire.operator import parse_request as _parse
 from .firmware import Firmware
 from .served import ServedRobot
 
 ACTIONS = ("reset",)
-MAX_REQUEST_BYTES = 4096
 
 
 def parse_request(payload: bytes | None) -> tuple[str | None, str | None]:
-    """``(action, error)`` of a request payload: exactly one of them is None."""
-    if payload is None or not payload:
-        return None, 'empty request: expected a JSON object such as {"action": "reset"}'
-    if len(payload) > MAX_REQUEST_BYTES:
-        return None, f"request of {len(payload)} bytes: expected at most {MAX_REQUEST_BYTES}"
+    """``(action, error)`` of a request payload (hal/wire/operator.py): exactly one of them is None."""
     try:
-        d = json.loads(payload)
-    except (ValueError, UnicodeDecodeError) as exc:
-        return None, f'request is not JSON ({exc}): expected an object such as {{"action": "reset"}}'
-    if not isinstance(d, dict) or set(d) != {"action"}:
-        return None, f'request {d!r}: expected an object with the single key "action"'
-    if d["action"] not in ACTIONS:
-        return None, f"action {d['action']!r}: expected one of {list(ACTIONS)}"
-    return d["action"], None
+        return _parse(payload, ACTIONS)[0], None
+    except MalformedMessage as exc:
+        return None, str(exc)
 
 
 def reset(firmware: Firmware, robot: ServedRobot, frame: SensorFrame) -> tuple[bool, str | None]:

@@ -67,6 +67,13 @@ class SafetyConfig:
     # machine to wake the robot's loop and deliver the frame (with 40 ms: 40.6-50.3 ms seen, 20 runs, load 5-6).
     lockstep_hold_after: float = setting(0.035, unit="s", min=0, strict_min=True)
     lockstep_servo_off_after: float | None = setting(None, unit="s", min="lockstep_hold_after", strict_min=True)
+    # A hold caught moving brakes: q_des = q_hold - hold_damping * dq (the encoders' backward difference within
+    # +-max_velocity), the term faded out over hold_brake_time: damping the servo lacks. The firmware measures dq
+    # itself, without the controller's command latency, so it brakes harder than the controller's hold (whose
+    # 0.02 s rings once commands come 2-5 ticks late): the simulated HRP-2's hip caught at 1.8 rad/s by a
+    # zero-latency hold moves 9.4 / 5.6 / 4.1 / 3.5 mrad with 0 / 0.01 / 0.02 / 0.04 s, none ringing. 0: no braking.
+    hold_damping: float = setting(0.02, unit="s", min=0)
+    hold_brake_time: float = setting(0.2, unit="s", min=0)
 
     def __post_init__(self):
         check_settings(self, HalError)

@@ -44,7 +44,7 @@ from . import operator
 from .claim import ClaimTable, claim_key
 from .config import CLOCKS, ServerConfig
 from .firmware import LOG_EXTRA, Firmware, FirmwareState, checked_frame
-from .gate import STALE, TAKE, CommandGate
+from .gate import STALE, TAKE, CommandGate, PendingCommand
 from .realtime import set_realtime_priority, set_timer_slack
 from .served import ServedRobot
 
@@ -80,7 +80,7 @@ class RobotServer:
         self._frame = None  # current frame: published, not stepped yet
         self._truth = None
         self._servo_off_sent = False
-        self._pending: tuple[np.ndarray, float, int] | None = None  # real time: newest (q_des, receive time, seq)
+        self._pending = PendingCommand()  # real time: the command to apply at the end of the tick
         self._published = -1  # seq of the last published frame
         self._t_published = math.nan  # when it was (last) published, time.monotonic() [s]
         self._controller_lost = False
@@ -98,7 +98,7 @@ class RobotServer:
         t = time.monotonic()
         buf = sample.payload.to_bytes()
         try:
-            seq, t_cmd, q_des = decode_command(buf, self.info.joint_names)
+            seq, t_cmd, q_des, hold = decode_command(buf, self.info.joint_names)
         except MalformedMessage as exc:
             with self._cond:
                 self.firmware.reject(reject_reason(exc), str(exc))
@@ -119,14 +119,12 @@ class RobotServer:
             if verdict == STALE:
                 self.firmware.stale()
             elif not self.lockstep:  # real time: the newest command wins, applied at the end of the tick
-                if self._pending is None or seq >= self._pending[2]:
-                    self._pending = (q_des, t, seq)
-                else:
+                if not self._pending.offer(q_des, t, seq, hold):
                     self.firmware.stale()
             else:  # lock-step: the command answering the current frame
-                self.firmware.accept(q_des, t)
+                self.firmware.accept(q_des, t, hold)
                 self.gate.applied(seq)
-                if self._frozen and self.firmware.state == FirmwareState.RUNNING:  # resumed: the watchdog re-arms
+                if self._frozen and self._commanded():  # resumed: the watchdog re-arms
                     self._frozen = False
                     self._cond.notify_all()
                 try:
@@ -182,7 +180,13 @@ class RobotServer:
         query.reply(str(query.key_expr), reply)
 
     def _on_truth_matching(self, status: zenoh.MatchingStatus) -> None:
+        """Somebody subscribes to the truth now (or nobody any more): the truth of the frame on the wire goes out
+        at once, so that a controller that connects has the truth of its first frame."""
         self._truth_wanted = status.matching
+        if status.matching:
+            with self._cond:
+                if self._serving:
+                    self._put_truth()
 
     def _on_query(self, query: zenoh.Query) -> None:
         key = str(query.key_expr)
@@ -206,7 +210,7 @@ class RobotServer:
                 if holder is not None:
                     logger.warning("%s: the reset ends the claim of %s", self.info.name, holder.describe())
                 self._servo_off_sent = False
-                self._pending = None
+                self._pending.clear()
                 if self._serving:
                     self._publish(truth=False)
                 self._cond.notify_all()
@@ -303,16 +307,26 @@ class RobotServer:
                     ", ".join(cfg.listen or cfg.connect))
 
     def _publish(self, truth: bool = True) -> None:
-        """Publish the current frame, then (``truth``) read and publish its ground truth (under _cond)."""
+        """Publish the current frame, then its ground truth (under _cond): ``truth``, a new frame: read the truth
+        (if somebody wants it or the log); else a republished frame: the truth read with it (read now if nobody
+        wanted it then: the robot has not stepped since)."""
         frame = self._frame
         self._published = frame.seq
         self._t_published = time.monotonic()
         self.gate.published(frame.seq, frame.time)
         self._pub_frame.put(encode_frame(frame, self.firmware.flags))
-        send = self.config.publish_truth and self._truth_wanted
         if truth:  # after the frame: off the controller's critical path; only if somebody wants it
+            send = self.config.publish_truth and self._truth_wanted
             self._truth = self.robot.ground_truth() if send or self._log is not None else None
-        if send and self._truth is not None:
+        self._put_truth()
+
+    def _put_truth(self) -> None:
+        """Publish the truth of the current frame if somebody wants it (under _cond)."""
+        if not (self.config.publish_truth and self._truth_wanted) or self._frame is None:
+            return
+        if self._truth is None or self._truth.seq != self._frame.seq:
+            self._truth = self.robot.ground_truth()
+        if self._truth is not None:
             self._pub_truth.put(encode_truth(self._truth))
 
     def _tick(self, now: float) -> None:
@@ -355,12 +369,12 @@ class RobotServer:
         with self._cond:
             while not self._stop.is_set():
                 now = time.monotonic()
-                state = fw.state
+                state, commanded = fw.state, self._commanded()
                 if self._frozen and (state != FirmwareState.HOLDING or self._controller_lost or fw.servo_off_due(now)):
                     self._frozen = False  # resumed by a command, the controller is gone, or servo_off_after: step on
-                if state != FirmwareState.RUNNING:
+                if not commanded:
                     self._controller_lost = False  # nothing to hold
-                if state == FirmwareState.RUNNING:
+                if commanded:
                     deadline = -math.inf if self._controller_lost else fw.last_command_time + safety.hold_after
                 elif state == FirmwareState.WAITING or self._frozen:  # the robot does not move
                     deadline = self._t_published + self.config.republish_interval
@@ -370,12 +384,17 @@ class RobotServer:
                     self._cond.wait(deadline - now)
                 elif state == FirmwareState.WAITING or self._frozen:
                     self._publish(truth=False)  # for controllers that join late; flagged HOLDING when frozen
-                elif state == FirmwareState.RUNNING and not self._controller_lost:
+                elif commanded and not self._controller_lost:
                     fw.watchdog(now)  # a hung controller: hold, frozen
                     self._frozen = True
                     self._publish(truth=False)
                 else:
                     self._tick(now)  # the firmware holds (or stays off)
+
+    def _commanded(self) -> bool:
+        """The claimer drives the robot: RUNNING, or holding on its commands' COMMAND_HOLD (lock-step then waits for
+        each command, as while running)."""
+        return self.firmware.state == FirmwareState.RUNNING or self.firmware.hold_commanded
 
     def _run_realtime(self) -> None:
         period, paced = self.info.period, self.config.clock == "realtime"
@@ -394,11 +413,10 @@ class RobotServer:
             with self._cond:
                 if self._stop.is_set():
                     break
-                if self._pending is not None:
-                    q_des, t_recv, seq = self._pending
-                    self.firmware.accept(q_des, t_recv)
+                if (taken := self._pending.take()) is not None:
+                    q_des, t_recv, seq, hold, first = taken
+                    self.firmware.accept(q_des, t_recv, hold, self.gate.newest - first)
                     self.gate.applied(seq)
-                    self._pending = None
                 self._tick(now)
 
     def _sleep_until(self, deadline: float) -> None:

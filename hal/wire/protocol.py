@@ -6,7 +6,7 @@ Every message is a 32-byte little-endian header followed by a float64 block::
      0     4    char[4]  magic b"STAU"
      4     1    uint8    protocol version (1)
      5     1    uint8    message type: 1 frame, 2 command, 3 truth
-     6     2    uint16   flags (frame: robot-side firmware state, FLAG_*; else 0)
+     6     2    uint16   flags (frame: robot-side firmware state, FLAG_*; command: COMMAND_HOLD or 0; truth: 0)
      8     8    uint64   seq: tick of the frame; a command carries the seq of the frame it answers
     16     8    float64  robot time [s] (sim time in simulation, never wall clock)
     24     2    uint16   n_joints
@@ -52,6 +52,10 @@ FLAG_CLAMPED = 1 << 3  # the command applied at this tick was clamped to the joi
 FLAG_RATE_LIMITED = 1 << 4  # the command applied at this tick was bounded by the velocity/acceleration limits
 FLAG_SENSOR_FAULT = 1 << 5  # the encoders are invalid or stale: holding their last valid reading
 
+COMMAND_HOLD = 1 << 0  # command flag: the controller has tripped; the robot holds now, braking, from its own
+# measurements (q_des is not applied), until a command without the flag (docs/protocol.md "State machine")
+COMMAND_FLAGS = COMMAND_HOLD  # every flag bit a command may carry; any other bit: rejected ("flags")
+
 _F8 = np.dtype("<f8")
 _ROBOT_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -82,6 +86,7 @@ class Command(NamedTuple):
     seq: int  # seq of the frame this command answers
     time: float  # [s] robot time of that frame
     q_des: np.ndarray  # [rad] (n_joints,) in RobotInfo.joint_names order
+    hold: bool = False  # COMMAND_HOLD: the controller holds after a trip (the robot brakes and holds itself)
 
 
 @dataclass(frozen=True)
@@ -119,7 +124,8 @@ def _bad(reason: str, msg: str, cls: type[MalformedMessage] = MalformedMessage) 
 
 def reject_reason(exc: MalformedMessage) -> str:
     """Reason code of a decoding error: ``header`` (size, magic, type), ``version``, ``time`` (not finite),
-    ``flags`` (not 0 in a command), ``counts`` (joints, F/T sensors, values, length) or ``values`` (NaN/inf)."""
+    ``flags`` (a bit beyond COMMAND_FLAGS in a command), ``counts`` (joints, F/T sensors, values, length) or
+    ``values`` (NaN/inf)."""
     return getattr(exc, "reason", "version" if isinstance(exc, ProtocolVersionMismatch) else "header")
 
 
@@ -223,20 +229,22 @@ def decode_frame(buf: bytes, n_joints: int | None = None,
 
 # ---------------------------------------------------------------------------------------------- command
 
-def encode_command(seq: int, time: float, q_des: np.ndarray) -> bytes:
-    """Serialize desired angles [rad] (RobotInfo order) answering frame ``seq`` stamped ``time``."""
+def encode_command(seq: int, time: float, q_des: np.ndarray, hold: bool = False) -> bytes:
+    """Serialize desired angles [rad] (RobotInfo order) answering frame ``seq`` stamped ``time`` (``hold``: with
+    the COMMAND_HOLD flag)."""
     q_des = np.asarray(q_des, dtype=_F8)
-    head = HEADER.pack(MAGIC, PROTOCOL_VERSION, MsgType.COMMAND, 0, seq, time, q_des.size, 0, q_des.size)
+    flags = COMMAND_HOLD if hold else 0
+    head = HEADER.pack(MAGIC, PROTOCOL_VERSION, MsgType.COMMAND, flags, seq, time, q_des.size, 0, q_des.size)
     return head + q_des.tobytes()
 
 
 def decode_command(buf: bytes, joint_names: Sequence[str]) -> Command:
-    """Parse and validate a command for a robot with joints ``joint_names`` (flags 0, counts, finite
-    angles; whether its seq and time match a published frame is the robot's check, hal/robot/gate.py)."""
+    """Parse and validate a command for a robot with joints ``joint_names`` (flags within COMMAND_FLAGS, counts,
+    finite angles; whether its seq and time match a published frame is the robot's check, hal/robot/gate.py)."""
     h = _unpack(buf, MsgType.COMMAND)
     n = len(joint_names)
-    if h[3] != 0:
-        raise _bad("flags", f"command flags = {h[3]:#06x}: expected 0")
+    if h[3] & ~COMMAND_FLAGS:
+        raise _bad("flags", f"command flags = {h[3]:#06x}: expected 0 or {COMMAND_HOLD:#06x} (COMMAND_HOLD)")
     if h[6] != n or h[7] != 0:
         raise _bad("counts", f"command for {h[6]} joints and {h[7]} F/T sensors: expected {n} joints and 0")
     _check_size(buf, h, n, 0)
@@ -245,7 +253,7 @@ def decode_command(buf: bytes, joint_names: Sequence[str]) -> Command:
         bad = int(np.flatnonzero(~np.isfinite(q))[0])
         raise _bad("values", f"command answering frame {h[4]}: {_joint(bad, joint_names)} = {q[bad]}: "
                              "expected a finite angle [rad]")
-    return Command(h[4], h[5], q)
+    return Command(h[4], h[5], q, bool(h[3] & COMMAND_HOLD))
 
 
 # ---------------------------------------------------------------------------------------------- truth
