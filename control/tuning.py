@@ -96,14 +96,18 @@ def predicted_radii(config, info, estimator=None, posture=None) -> dict[str, flo
     return {j: radius(lm, *_servo_gains(config, j)) for j, lm in models.items()}
 
 
+class UnstableLoopError(ConfigError):
+    """The identified model predicts that a joint's torque loop diverges at the configured gains."""
+
+
 def check_predicted_stable(config, info, motors_file: str, estimator=None, posture=None) -> Mapping[str, float]:
-    """:func:`predicted_radii`, or a :class:`ConfigError` naming ``motors_file``, the joint, its k_tau and k_v
-    and the gains when one exceeds :data:`RHO_MAX`."""
+    """:func:`predicted_radii`, or an :class:`UnstableLoopError` naming ``motors_file``, the joint, its k_tau and
+    k_v and the gains when one exceeds :data:`RHO_MAX`."""
     radii = predicted_radii(config, info, estimator, posture)
     for j, rho in radii.items():
         if not (np.isfinite(rho) and rho <= RHO_MAX):
             m, g = config.motors[j], config.gains[j]
-            raise ConfigError(
+            raise UnstableLoopError(
                 f"{motors_file}: joint \"{j}\": fields 'joints.{j}.k_tau' = {m.k_tau:.4g}, 'joints.{j}.k_v' = "
                 f"{m.k_v:.4g} with k_p = {g.k_p:g}, k_s = {g.k_s:.4g} N m/rad, k_d = {g.k_d:.4g} N m s/rad: the model "
                 f"predicts an unstable torque loop (spectral radius {rho:.4f} per period): expected at most "

@@ -254,6 +254,7 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     from servotau.control import ControlManager
     from servotau.control.loop import ControlLoop, estimator_config
     from servotau.control.trajectory import ForceCompatiblePosture, right_leg_swing
+    from servotau.control.tuning import UnstableLoopError
     from servotau.estimation import TorqueEstimator
     from servotau.hal.backends.inprocess import InProcessBackend
     from servotau.simrobot.sim import SimRobot
@@ -269,6 +270,10 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     try:  # the motor file and gains are checked before anything moves
         manager = ControlManager(info, control_config(info, k6, force_axes if force_profile is not None else (), k7,
                                                       motors, velocity_feedforward, k_iq, posture))
+    except UnstableLoopError as err:  # refused before anything moved: a run without records, counted as a trip
+        backend.close()
+        log.warning("%s: refused: %s", name, err)
+        return Run(name, tripped=f"refused before moving: {err}")
     except BaseException:
         backend.close()
         raise
