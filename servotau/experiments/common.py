@@ -262,14 +262,14 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     if posture not in ("compatible", "start"):
         raise ValueError(f"posture = {posture!r}: expected 'compatible' or 'start'")
     robot = SimRobot(sim_config(scenario, seed, servo))
-    posture = robot.read().q.copy()  # the start posture (read without a step)
+    start_q = robot.read().q.copy()  # the start posture (read without a step)
     backend = InProcessBackend(robot)
     info = backend.info
     legs = np.array([info.joint_names.index(j) for j in LEG])
     est_cfg = estimator_config()
     try:  # the motor file and gains are checked before anything moves
         manager = ControlManager(info, control_config(info, k6, force_axes if force_profile is not None else (), k7,
-                                                      motors, velocity_feedforward, k_iq, posture))
+                                                      motors, velocity_feedforward, k_iq, start_q))
     except UnstableLoopError as err:  # refused before anything moved: a run without records, counted as a trip
         backend.close()
         log.warning("%s: refused: %s", name, err)
