@@ -95,7 +95,8 @@ def finish(result: dict, doc: str | None) -> None:
     if doc:
         from servotau.config import CONFIG_DIR, load_toml
 
-        write_section(result, Path(doc), load_toml(CONFIG_DIR / "control.toml").data["defaults"])
+        data = load_toml(CONFIG_DIR / "control.toml").data
+        write_section(result, Path(doc), data["defaults"], data)
     print(json.dumps(result))
 
 

@@ -207,9 +207,15 @@ def merge(results: list[dict]) -> dict:
             "seconds": None}  # the parts may reuse draws of earlier runs: their own times are in the rows
 
 
-def section_markdown(result: dict, control: dict) -> str:
-    """The docs/results.md section of a bench result; ``control`` is config/control.toml's [defaults] (its gains)."""
+def section_markdown(result: dict, control: dict, top: dict | None = None) -> str:
+    """The docs/results.md section of a bench result; ``control`` is config/control.toml's [defaults] (its gains),
+    ``top`` its top-level settings (position_feedback, gain_schedule)."""
     from .common import LEG_LABELS
+
+    top = top or {}
+    schedule = (", lowered per joint to keep the identified model's margin (gain_schedule = \"margin\")"
+                if top.get("gain_schedule") == "margin" else "")
+    position = "encoder" if top.get("position_feedback") == "encoder" else "estimate q_hat"
 
     lines = [BEGIN, "## Torque control on a family of servos (issue 22, `bench/servo_family.py`)", "",
              "Each draw of servotau/experiments/servo_family.py (per joint group: servo gain x0.6-1.5, damping "
@@ -218,10 +224,12 @@ def section_markdown(result: dict, control: dict) -> str:
              f"candidates {', '.join(result['effects'])}, at most {result['max_steps']} per joint), then "
              "`servotau experiment motion --servo DRAW --motors motors.toml` (position servo, then torque control at "
              "each K6; errors on the true joint angles). Gains: config/control.toml "
-             f"(k_p = {control.get('k_p')}, k7 = {control.get('k7_per_k_v', control.get('k7'))}"
-             f"{' k_v' if 'k7_per_k_v' in control else ' s'} / sqrt(K6), k_iq = {control.get('k_iq')} /s). A run that "
-             "trips counts as lost on every joint. Parts: tuning = seeds the gains were looked at on; held out = "
-             "seeds never looked at while tuning.", "",
+             f"(k_p = {control.get('k_p')}{schedule}, k7 = {control.get('k7_per_k_v', control.get('k7'))}"
+             f"{' k_v' if 'k7_per_k_v' in control else ' s'}"
+             f"{' / sqrt(K6)' if control.get('k7_scaling') == 'inverse_sqrt_k6' else ''}, k_iq = "
+             f"{control.get('k_iq')} /s, position error from the {position}). A run that trips, or that the model "
+             "refuses before it moves, counts as lost on every joint. Parts: tuning = seeds the gains were looked "
+             "at on; held out = seeds never looked at while tuning.", "",
              "Share of (draw, leg joint, mean|max) where torque control beats the position servo (target):", "",
              "| part | draws | " + " | ".join(f"{k} ({100 * TARGETS.get(k, 0):.0f} %)" for k in result["all"]) + " |",
              "|---|---|" + "---|" * len(result["all"])]
@@ -250,10 +258,10 @@ def section_markdown(result: dict, control: dict) -> str:
     return "\n".join(lines)
 
 
-def write_section(result: dict, doc: Path, control: dict) -> None:
+def write_section(result: dict, doc: Path, control: dict, top: dict | None = None) -> None:
     """Replace (or append) the section in ``doc``."""
     text = doc.read_text() if doc.exists() else ""
-    new = section_markdown(result, control)
+    new = section_markdown(result, control, top)
     if BEGIN in text and END in text:
         text = text[:text.index(BEGIN)] + new + text[text.index(END) + len(END):]
     else:
