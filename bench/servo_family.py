@@ -46,6 +46,8 @@ def main() -> None:
                         help="run nothing: merge these outputs of earlier runs (e.g. parts run in parallel)")
     parser.add_argument("--skip-done", action="store_true",
                         help="reuse the rows of draws already finished under --out (their row.json)")
+    parser.add_argument("--reuse-identification", action="store_true",
+                        help="keep the motor files of draws identified earlier under --out; run only the experiments")
     parser.add_argument("--from-rows", action="store_true",
                         help="run nothing: score the draws finished under --out (their row.json)")
     args = parser.parse_args()
@@ -76,7 +78,8 @@ def main() -> None:
         done = Path(args.out) / f"draw_{seed}" / "row.json"
         if args.skip_done and done.exists():
             return json.loads(done.read_text())
-        return run_draw(seed, Path(args.out), k6, effects=effects, max_steps=args.max_steps, progress=say)
+        return run_draw(seed, Path(args.out), k6, effects=effects, max_steps=args.max_steps, progress=say,
+                        reuse_identification=args.reuse_identification)
 
     rows = {part: [row(s) for s in part_seeds] for part, part_seeds in seeds.items()}
     result = {"k6": list(k6), "seeds": seeds, "effects": list(effects), "max_steps": args.max_steps,
@@ -92,7 +95,8 @@ def finish(result: dict, doc: str | None) -> None:
     if doc:
         from servotau.config import CONFIG_DIR, load_toml
 
-        write_section(result, Path(doc), load_toml(CONFIG_DIR / "control.toml").data["defaults"])
+        data = load_toml(CONFIG_DIR / "control.toml").data
+        write_section(result, Path(doc), data["defaults"], data)
     print(json.dumps(result))
 
 

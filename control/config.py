@@ -172,6 +172,13 @@ class ControlConfig:
     # torque mode, the estimate invalid after more skipped frames than the estimator's max_gap: "position" =
     # position control (bumpless) until the estimate is valid again, then torque mode again; "trip" = a safety trip
     gap_fallback: str = setting("position", choices=("position", "trip"))
+    # the position error K_s e_q reads: "estimate" = q_hat (the paper), "encoder" = the frame's measured q (the
+    # last-sample filter's 2x peak near 20 Hz, fed back at K6 = 1, drives a servo with little damping unstable;
+    # control/stability.py)
+    position_feedback: str = setting("estimate", choices=("estimate", "encoder"))
+    # k_p per joint: "fixed" = as configured; "margin" = lowered (halved, then 0) until the identified model's
+    # loop keeps a margin on servos that differ from it (control/tuning.py, applied by the experiments)
+    gain_schedule: str = setting("fixed", choices=("fixed", "margin"))
     source: str = "<direct>"  # file the config came from
     _torque_mask: np.ndarray = field(default=None, repr=False, compare=False)
 

@@ -69,6 +69,7 @@ class TorqueControlLaw:
         self.k6 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_s  # [-]
         self.k7 = tc.k_tau * (1.0 + tc.k_p) * self.inverse_dynamics.k_d  # [s]
         self._ff_velocity = config.velocity_feedforward
+        self._encoder_position = config.position_feedback == "encoder"
         self._kt_kp = tc.k_tau * tc.k_p
         self._kt_1kp = tc.k_tau * (1.0 + tc.k_p)
         n = len(config.joint_names)
@@ -154,13 +155,19 @@ class TorqueControlLaw:
         self.position_integral.reset()
 
     def update(self, terms: ControlTerms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, wrenches=None,
-               base: BaseState | None = None) -> np.ndarray:
+               base: BaseState | None = None, q_encoder=None) -> np.ndarray:
         """Compute the law and write every torque component into ``terms`` (from :meth:`make_terms`); return
-        ``dq_err`` (n,) [rad]."""
+        ``dq_err`` (n,) [rad]. ``q_encoder``: the frame's measured angles [rad], read by the position error
+        ``e_q = q_d - q`` instead of ``q_hat`` when ``position_feedback = "encoder"`` (None: q_hat)."""
         if self._ramp_k < self._ramp_ticks:
             self._ramp_step()
         idc, tc, t, tmp = self.inverse_dynamics, self.torque, terms, self._tmp
         tau_d = idc.update(q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, wrenches, base)
+        if self._encoder_position and q_encoder is not None:  # e_q = q_d - q: add K_s (q_hat - q) to tau_d
+            np.subtract(q_hat, q_encoder, out=tmp)
+            idc.e_q += tmp
+            tmp *= idc.k_s
+            tau_d += tmp
         pint = self.position_integral
         if pint.active:
             tau_d += pint.update(idc.e_q, dq_d, idc.task_jacobian)

@@ -246,7 +246,7 @@ class ControlManager:
         if has_estimate:
             dq_err = self.law.update(t, estimate.q, estimate.dq, estimate.ddq, estimate.tau, reference.q,
                                      reference.dq, reference.ddq, getattr(estimate, "wrenches", None),
-                                     self._base(estimate))
+                                     self._base(estimate), q_encoder=q)
         cmd = self._cmd
         np.subtract(reference.q, q, out=t.position_command)  # q_ref - q
         if mode == Mode.TORQUE:

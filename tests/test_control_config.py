@@ -72,7 +72,7 @@ def test_k7_scaling_divides_the_velocity_gain_by_sqrt_k6():
 
     assert k7("RLEG_JOINT3") == pytest.approx(0.002)
     assert k7("RLEG_JOINT2") == pytest.approx(0.001)
-    assert BASE["defaults"]["k7_scaling"] == "inverse_sqrt_k6"  # the shipped rule; K6 = 1 keeps k7 itself
+    assert BASE["defaults"]["k7_scaling"] == "constant"  # the shipped rule: k7 = k_v at every K6
 
 
 @pytest.mark.parametrize("path, value, field, expected", [
@@ -94,7 +94,8 @@ def test_k7_scaling_divides_the_velocity_gain_by_sqrt_k6():
     ("fade_time", -1.0, "fade_time", ">= 0"),
     ("velocity_feedforward", "measured", "velocity_feedforward", "'estimate', 'reference'"),
     ("defaults.k7_scaling", "inverse_k6", "defaults.k7_scaling", "'constant', 'inverse_sqrt_k6'"),
-    ("joints", {"RLEG_JOINT3": {"k6": 0.0}}, "k7_scaling", "'constant' for a joint without position gain"),
+    ("joints", {"RLEG_JOINT3": {"k6": 0.0, "k7_scaling": "inverse_sqrt_k6"}}, "k7_scaling",
+     "'constant' for a joint without position gain"),
     ("contacts", ["left_knee"], "contacts", "F/T sensors"),
     ("safety.max_torque", -5.0, "safety.max_torque", "> 0"),
     ("safety.max_velocity", math.inf, "safety.max_velocity", "finite"),

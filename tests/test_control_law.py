@@ -160,3 +160,22 @@ def soft_gains(config, **overrides):
             v[i] = x
         out.append(v)
     return out
+
+
+def test_encoder_position_feedback_reads_the_measured_angles_and_the_components_still_sum():
+    """position_feedback = "encoder": e_q = q_d - q (the frame's angles), the command moves by K6 (q_hat - q) and
+    the components still sum to it; "estimate" (the paper) keeps q_hat."""
+    import dataclasses
+
+    cfg = _config(force=False)
+    q_hat, dq_hat, ddq_hat, q_d, dq_d, ddq_d, w, rng = _inputs()
+    q_enc = q_hat + rng.normal(0, 0.002, 30)
+    tau_hat = rng.normal(0, 20, 30)
+    out = {}
+    for mode in ("estimate", "encoder"):
+        law = TorqueControlLaw(dataclasses.replace(cfg, position_feedback=mode), str(MODEL_PATH), 1e-3)
+        terms = law.make_terms()
+        out[mode] = law.update(terms, q_hat, dq_hat, ddq_hat, tau_hat, q_d, dq_d, ddq_d, w, q_encoder=q_enc).copy()
+        np.testing.assert_allclose(terms.component_sum(), out[mode], atol=1e-15)
+        np.testing.assert_allclose(terms.e_q, q_d - (q_enc if mode == "encoder" else q_hat))
+    np.testing.assert_allclose(out["encoder"] - out["estimate"], law.k6 * (q_hat - q_enc), atol=1e-12)

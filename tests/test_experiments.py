@@ -136,7 +136,7 @@ def test_force_metrics_report_the_worst_apex_and_the_troughs():
 
 def test_control_config_overrides_change_one_setting_each():
     """The experiments' config overrides: K6 on every torque joint, k_iq = 0 switches the position integral off
-    (the 'k_iq=0' runs), a k7 is a constant velocity gain (the 'k7=' runs: the same k_d at every K6), force axes
+    (the 'k_iq=0' runs), a k7 is a constant velocity gain (the 'k7=' runs: the same K7 at every K6), force axes
     add the force task; without them the shipped integral stays on."""
     info = RobotInfo("test-robot", JOINT_NAMES, -np.full(30, 3.0), np.full(30, 3.0), 1e-3, str(MODEL_PATH))
     shipped = common.control_config(info, 0.1, ())
@@ -146,6 +146,10 @@ def test_control_config_overrides_change_one_setting_each():
     np.testing.assert_allclose(off.joint_vector("k_s"), shipped.joint_vector("k_s"))
     k_s_at_1 = common.control_config(info, 1.0, ()).joint_vector("k_s")
     np.testing.assert_allclose(k_s_at_1, 10.0 * shipped.joint_vector("k_s"))
-    constant = common.control_config(info, 0.1, (), k7=0.002).joint_vector("k_d")
-    np.testing.assert_allclose(constant, common.control_config(info, 1.0, (), k7=0.002).joint_vector("k_d"))
-    assert constant[:6].min() > 0 and not np.allclose(constant, shipped.joint_vector("k_d"))
+    def k7(cfg):  # K7 = k_tau (1 + k_p) k_d [s] per torque joint (k_p may follow the margin schedule)
+        return np.array([m.k_tau * (1 + cfg.gains[j].k_p) * cfg.gains[j].k_d for j, m in cfg.motors.items()])
+
+    constant = k7(common.control_config(info, 0.1, (), k7=0.006))
+    np.testing.assert_allclose(constant, 0.006)
+    np.testing.assert_allclose(k7(common.control_config(info, 1.0, (), k7=0.006)), 0.006)
+    assert not np.allclose(constant, k7(shipped))

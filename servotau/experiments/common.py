@@ -72,13 +72,15 @@ class Run:
 
 
 def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: float | None = None,
-                   motors: str | None = None, velocity_feedforward: str | None = None, k_iq: float | None = None):
+                   motors: str | None = None, velocity_feedforward: str | None = None, k_iq: float | None = None,
+                   posture=None):
     """config/control.toml with every torque joint at ``k6`` (and ``k7`` [s], ``k_iq`` [1/s] if given), the motor
     file ``motors`` and the ``velocity_feedforward`` if given and, with ``force_axes``, the paper's force task on
-    those axes."""
+    those axes; k_p scheduled from the identified model's margin at ``posture`` [rad] (the start posture) when the
+    config says ``gain_schedule = "margin"``, then checked (control/tuning.py)."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
-    from servotau.control.tuning import check_predicted_stable
+    from servotau.control.tuning import check_predicted_stable, schedule_gains
 
     data = copy.deepcopy(load_toml(CONFIG_DIR / "control.toml").data)
 
@@ -106,7 +108,8 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
         data["force"] = {"sensor": "right_ankle", "frame": "ft_right_ankle", "offset": [0.0, 0.0, -0.02],
                          "axes": list(force_axes), "k_f": [FORCE_KF] * len(force_axes)}
     config = ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
-    check_predicted_stable(config, info, str(data["motors"]))  # before anything moves
+    config = schedule_gains(config, info, posture=posture)
+    check_predicted_stable(config, info, str(data["motors"]), posture=posture)  # before anything moves
     return config
 
 
@@ -251,19 +254,26 @@ def simulate(name: str, *, scenario: str = "hanging", mode: str = "torque", k6: 
     from servotau.control import ControlManager
     from servotau.control.loop import ControlLoop, estimator_config
     from servotau.control.trajectory import ForceCompatiblePosture, right_leg_swing
+    from servotau.control.tuning import UnstableLoopError
     from servotau.estimation import TorqueEstimator
     from servotau.hal.backends.inprocess import InProcessBackend
     from servotau.simrobot.sim import SimRobot
 
     if posture not in ("compatible", "start"):
         raise ValueError(f"posture = {posture!r}: expected 'compatible' or 'start'")
-    backend = InProcessBackend(SimRobot(sim_config(scenario, seed, servo)))
+    robot = SimRobot(sim_config(scenario, seed, servo))
+    start_q = robot.read().q.copy()  # the start posture (read without a step)
+    backend = InProcessBackend(robot)
     info = backend.info
     legs = np.array([info.joint_names.index(j) for j in LEG])
     est_cfg = estimator_config()
     try:  # the motor file and gains are checked before anything moves
         manager = ControlManager(info, control_config(info, k6, force_axes if force_profile is not None else (), k7,
-                                                      motors, velocity_feedforward, k_iq))
+                                                      motors, velocity_feedforward, k_iq, start_q))
+    except UnstableLoopError as err:  # refused before anything moved: a run without records, counted as a trip
+        backend.close()
+        log.warning("%s: refused: %s", name, err)
+        return Run(name, tripped=f"refused before moving: {err}")
     except BaseException:
         backend.close()
         raise

@@ -49,6 +49,8 @@ PAPER_MAX = {
 
 def motion_errors(run: Run) -> tuple[np.ndarray, np.ndarray]:
     """RMS (Table 2 formula) and max |q_d - q| per right-leg joint [mrad], on the true joint angles."""
+    if not run.time:  # refused before moving, or tripped before the task: no record
+        return np.full(len(LEG_LABELS), np.nan), np.full(len(LEG_LABELS), np.nan)
     a = run.arrays()
     e = a["q_ref"] - a["q_true"]
     return 1e3 * np.sqrt(np.mean(e**2, axis=0)), 1e3 * np.max(np.abs(e), axis=0)
@@ -127,6 +129,8 @@ def _plot_motion(path: Path, runs: dict[str, Run]) -> None:
     axes[0].legend(fontsize=7, ncol=4)
     for ax, j in zip(axes[1:], joints, strict=True):
         for name, run in runs.items():
+            if not run.time:
+                continue
             a = run.arrays()
             ax.plot(a["time"], 1e3 * (a["q_ref"][:, j] - a["q_true"][:, j]), label=name, lw=0.8)
         ax.set_ylabel(f"{LEG_LABELS[j]} error [mrad]")

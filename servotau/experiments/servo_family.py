@@ -103,22 +103,30 @@ def write_servo_file(d: ServoDraw, path: str | Path, nominal: str | Path | None 
 
 # -- the chain on one draw, and the scores -------------------------------------------------------------------
 def run_draw(seed: int, out: Path, k6: tuple[float, ...], *, effects: tuple[str, ...] | None = None,
-             max_steps: int = 3, progress=None) -> dict:
+             max_steps: int = 3, progress=None, reuse_identification: bool = False) -> dict:
     """The unattended chain on draw ``seed``: its servo file, ``servotau identify run`` on it (motor file), the
     motion experiment (position servo and torque control at each ``k6``) with that servo and motor file. Returns the
-    row: errors per run [mrad], trips, and per K6 which (leg joint, mean|max) torque control wins."""
+    row: errors per run [mrad], trips, and per K6 which (leg joint, mean|max) torque control wins.
+
+    ``reuse_identification``: keep the motor file of an earlier run of this draw under ``out`` (its
+    ``identification.json`` and ``motors.toml``, for the same servo file) and run only the experiments: the
+    identification does not depend on the controller's gains."""
     import time
 
     from servotau.apps.identify import collect, sim_config_with_servo
     from servotau.identification.motor_file import CANDIDATES, build_motor_file, write_motor_file
 
-    from .common import LEG_LABELS, run_label
-    from .motion import motion_errors, motion_runs
-
     say = progress or (lambda _m: None)
     folder = out / f"draw_{seed}"
     folder.mkdir(parents=True, exist_ok=True)
     servo = write_servo_file(draw(seed), folder / "servo.toml")
+    done = folder / "identification.json"
+    if reuse_identification and done.exists() and (folder / "motors.toml").exists():
+        kept = json.loads(done.read_text())
+        if kept.get("servo") == servo.read_text():
+            say(f"draw {seed}: motor file of an earlier identification ({kept['identify_seconds']:.0f} s)")
+            return _experiments(seed, folder, servo, folder / "motors.toml", k6, kept["choices"],
+                                kept["identify_seconds"], say)
     start = time.perf_counter()
     sim = sim_config_with_servo(str(servo), "sim_identification.toml", folder / "sim_identification.toml")
     log = folder / "ident.parquet"
@@ -130,6 +138,18 @@ def run_draw(seed: int, out: Path, k6: tuple[float, ...], *, effects: tuple[str,
     say(f"draw {seed}: identified in {t_ident:.0f} s: "
         + "; ".join(f"{j}: {'+'.join(c.effects) or '-'}{' +db' if c.dead_band_kept else ''}"
                     for j, c in report.choices.items()))
+    choices = {j: c.to_dict() for j, c in report.choices.items()}
+    done.write_text(json.dumps({"servo": servo.read_text(), "identify_seconds": round(t_ident, 1),
+                                "choices": choices}, indent=1))
+    return _experiments(seed, folder, servo, motors, k6, choices, t_ident, say)
+
+
+def _experiments(seed: int, folder: Path, servo: Path, motors: Path, k6: tuple[float, ...], choices: dict,
+                 t_ident: float, say) -> dict:
+    """The motion experiment of one draw with its motor file, and the draw's row (written to row.json)."""
+    from .common import LEG_LABELS, run_label
+    from .motion import motion_errors, motion_runs
+
     runs = motion_runs(False, folder / "motion", servo=str(servo.resolve()), motors=str(motors.resolve()), gains=k6)
     errors = {name: motion_errors(r) for name, r in runs.items()}
     pos_mean, pos_max = errors["position"]
@@ -144,7 +164,7 @@ def run_draw(seed: int, out: Path, k6: tuple[float, ...], *, effects: tuple[str,
     say(f"draw {seed}: " + ", ".join(f"{n}: {sum(v for w in wins[n].values() for v in w.values())}/12"
                                      f"{' TRIP' if tripped[n] else ''}" for n in wins))
     row = {"seed": seed, "servo": str(servo), "motors": str(motors), "identify_seconds": round(t_ident, 1),
-           "choices": {j: c.to_dict() for j, c in report.choices.items()},
+           "choices": choices,
            "mean_mrad": {n: e[0].tolist() for n, e in errors.items()},
            "max_mrad": {n: e[1].tolist() for n, e in errors.items()},
            "tripped": tripped, "wins": wins}
@@ -187,9 +207,15 @@ def merge(results: list[dict]) -> dict:
             "seconds": None}  # the parts may reuse draws of earlier runs: their own times are in the rows
 
 
-def section_markdown(result: dict, control: dict) -> str:
-    """The docs/results.md section of a bench result; ``control`` is config/control.toml's [defaults] (its gains)."""
+def section_markdown(result: dict, control: dict, top: dict | None = None) -> str:
+    """The docs/results.md section of a bench result; ``control`` is config/control.toml's [defaults] (its gains),
+    ``top`` its top-level settings (position_feedback, gain_schedule)."""
     from .common import LEG_LABELS
+
+    top = top or {}
+    schedule = (", lowered per joint to keep the identified model's margin (gain_schedule = \"margin\")"
+                if top.get("gain_schedule") == "margin" else "")
+    position = "encoder" if top.get("position_feedback") == "encoder" else "estimate q_hat"
 
     lines = [BEGIN, "## Torque control on a family of servos (issue 22, `bench/servo_family.py`)", "",
              "Each draw of servotau/experiments/servo_family.py (per joint group: servo gain x0.6-1.5, damping "
@@ -198,10 +224,12 @@ def section_markdown(result: dict, control: dict) -> str:
              f"candidates {', '.join(result['effects'])}, at most {result['max_steps']} per joint), then "
              "`servotau experiment motion --servo DRAW --motors motors.toml` (position servo, then torque control at "
              "each K6; errors on the true joint angles). Gains: config/control.toml "
-             f"(k_p = {control.get('k_p')}, k7 = {control.get('k7_per_k_v', control.get('k7'))}"
-             f"{' k_v' if 'k7_per_k_v' in control else ' s'} / sqrt(K6), k_iq = {control.get('k_iq')} /s). A run that "
-             "trips counts as lost on every joint. Parts: tuning = seeds the gains were looked at on; held out = "
-             "seeds never looked at while tuning.", "",
+             f"(k_p = {control.get('k_p')}{schedule}, k7 = {control.get('k7_per_k_v', control.get('k7'))}"
+             f"{' k_v' if 'k7_per_k_v' in control else ' s'}"
+             f"{' / sqrt(K6)' if control.get('k7_scaling') == 'inverse_sqrt_k6' else ''}, k_iq = "
+             f"{control.get('k_iq')} /s, position error from the {position}). A run that trips, or that the model "
+             "refuses before it moves, counts as lost on every joint. Parts: tuning = seeds the gains were looked "
+             "at on; held out = seeds never looked at while tuning.", "",
              "Share of (draw, leg joint, mean|max) where torque control beats the position servo (target):", "",
              "| part | draws | " + " | ".join(f"{k} ({100 * TARGETS.get(k, 0):.0f} %)" for k in result["all"]) + " |",
              "|---|---|" + "---|" * len(result["all"])]
@@ -230,10 +258,10 @@ def section_markdown(result: dict, control: dict) -> str:
     return "\n".join(lines)
 
 
-def write_section(result: dict, doc: Path, control: dict) -> None:
+def write_section(result: dict, doc: Path, control: dict, top: dict | None = None) -> None:
     """Replace (or append) the section in ``doc``."""
     text = doc.read_text() if doc.exists() else ""
-    new = section_markdown(result, control)
+    new = section_markdown(result, control, top)
     if BEGIN in text and END in text:
         text = text[:text.index(BEGIN)] + new + text[text.index(END) + len(END):]
     else:
