@@ -40,6 +40,10 @@ VERDICTS = ("missing_effect", "no_missing_effect", "unexplained", "cannot_tell")
 """``cannot_tell``: the log itself cannot decide (units doubted, a joint that never moves): every effect is
 untestable and the message says why."""
 
+TIE = 0.01
+"""Two effects whose held-out errors differ by less than this fraction tie: the blocks do not order them, and
+:attr:`Diagnosis.shortlist` keeps the runner-up second."""
+
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
 velocity's window): before they call a log ``unexplained`` they are re-run with each less biased derivative
@@ -162,6 +166,24 @@ class Diagnosis:
         return self.ranking[0] if self.ranking and self.ranking[0].testable else None
 
     @property
+    def shortlist(self) -> tuple[Candidate, ...]:
+        """The first two effects to add, in order (add one, watch the error fall, re-rank): the first testable
+        effect of the ranking, and second the next to add over the model with it (:attr:`then`, greedy forward
+        selection) when the first is the named effect and no other effect ties with it. Two effects hidden together
+        rank as the first one and its look-alikes over the base model; the second shows once the first is in. A
+        runner-up whose held-out error is within ``TIE`` of the first's (and that does not nest it: the nesting rule
+        already put it behind, its extra part not nameable) is as good a first, and stays second. Otherwise the
+        ranking's first two testable effects."""
+        tested = [c for c in self.ranking if c.testable]
+        if not tested or self.then is None or self.top is not tested[0]:
+            return tuple(tested[:2])
+        first = tested[0]
+        rival = next((c for c in tested[1:] if first.effect not in get_effect(c.effect).nests), None)
+        if rival is not None and rival.heldout_error <= (1.0 + TIE) * first.heldout_error:
+            return tuple(tested[:2])
+        return first, self.then
+
+    @property
     def runner_up(self) -> Candidate | None:
         top = self.top
         return next((c for c in self.ranking if c.testable and c is not top), None)
@@ -193,6 +215,7 @@ class Diagnosis:
             "tail_share": _r(self.tail_share),
             "checks": list(self.checks),
             "then": None if self.then is None else self.then.to_dict(),
+            "shortlist": [c.effect for c in self.shortlist],
             "train": self.base.train.to_dict(),
             "heldout": None if self.base.heldout is None else self.base.heldout.to_dict(),
             "excitation": self.excitation.to_dict(),

@@ -79,7 +79,7 @@ def diagnose_log(ds) -> dict:
     except Exception as exc:  # a crash is a result, recorded
         return {"verdict": f"error: {type(exc).__name__}: {exc}"[:200], "ranked": [], "gains": [],
                 "seconds": time.perf_counter() - start}
-    top = [c for c in d.ranking if c.testable][:2]
+    top = d.shortlist
     named = d.top.effect if d.verdict == "missing_effect" else None  # what the verdict names (may be ranked second)
     return {"verdict": d.verdict, "named": named, "then": d.then.effect if d.then is not None else None,
             "ranked": [c.effect for c in top],
