@@ -72,7 +72,7 @@ from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
 from .resolution import quantisation_floor
-from .verdict import Candidate, Confusion, Diagnosis, nameable, recheck_probes, verdict_of
+from .verdict import Candidate, Confusion, Diagnosis, nameable, recheck_probes, tied_rival, verdict_of
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
 
@@ -321,12 +321,31 @@ def diagnose(
     d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
     if d.verdict != "missing_effect" or not next_effect:
         return d
-    try:
-        then = _then(ds, spec, d.top, ranking, loss, folds, min_gain, cache)
-    except IdentificationError as exc_:
-        log.info("no next effect after %s: %s", d.top.effect, exc_)
-        return d
+    then = _then_or_none(ds, spec, d.top, ranking, loss, folds, min_gain, cache)
+    rival = tied_rival(ranking, d.top)
+    if rival is not None and nameable(rival, min_gain):
+        # the blocks do not order the two: the one whose next effect leaves the smaller error goes first
+        then_r = _then_or_none(ds, spec, rival, ranking, loss, folds, min_gain, cache)
+        if _two_steps(rival, then_r) < _two_steps(d.top, then):
+            ranking = [c for c in ranking if c is not rival]
+            ranking.insert(ranking.index(d.top), rival)
+            then = then_r
+            d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, then)
     return d if then is None else verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, then)
+
+
+def _then_or_none(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate], loss: Loss,
+                  folds: list[Fold], min_gain: float, cache: dict) -> Candidate | None:
+    try:
+        return _then(ds, spec, top, ranking, loss, folds, min_gain, cache)
+    except IdentificationError as exc_:
+        log.info("no next effect after %s: %s", top.effect, exc_)
+        return None
+
+
+def _two_steps(first: Candidate, then: Candidate | None) -> float:
+    """The held-out error with ``first`` and, if any, the next effect to add after it."""
+    return first.heldout_error if then is None else then.heldout_error
 
 
 def _order(c: Candidate) -> tuple:

@@ -41,8 +41,8 @@ VERDICTS = ("missing_effect", "no_missing_effect", "unexplained", "cannot_tell")
 untestable and the message says why."""
 
 TIE = 0.01
-"""Two effects whose held-out errors differ by less than this fraction tie: the blocks do not order them, and
-:attr:`Diagnosis.shortlist` keeps the runner-up second."""
+"""Two effects whose held-out errors differ by less than this fraction tie: the blocks do not order them
+(:func:`tied_rival`)."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
@@ -169,19 +169,13 @@ class Diagnosis:
     def shortlist(self) -> tuple[Candidate, ...]:
         """The first two effects to add, in order (add one, watch the error fall, re-rank): the first testable
         effect of the ranking, and second the next to add over the model with it (:attr:`then`, greedy forward
-        selection) when the first is the named effect and no other effect ties with it. Two effects hidden together
-        rank as the first one and its look-alikes over the base model; the second shows once the first is in. A
-        runner-up whose held-out error is within ``TIE`` of the first's (and that does not nest it: the nesting rule
-        already put it behind, its extra part not nameable) is as good a first, and stays second. Otherwise the
-        ranking's first two testable effects."""
+        selection) when the first is the named effect. Two effects hidden together rank as the first one and its
+        look-alikes over the base model; the second shows once the first is in. Otherwise the ranking's first two
+        testable effects."""
         tested = [c for c in self.ranking if c.testable]
         if not tested or self.then is None or self.top is not tested[0]:
             return tuple(tested[:2])
-        first = tested[0]
-        rival = next((c for c in tested[1:] if first.effect not in get_effect(c.effect).nests), None)
-        if rival is not None and rival.heldout_error <= (1.0 + TIE) * first.heldout_error:
-            return tuple(tested[:2])
-        return first, self.then
+        return tested[0], self.then
 
     @property
     def runner_up(self) -> Candidate | None:
@@ -220,6 +214,17 @@ class Diagnosis:
             "heldout": None if self.base.heldout is None else self.base.heldout.to_dict(),
             "excitation": self.excitation.to_dict(),
         }
+
+
+def tied_rival(ranking, top: Candidate) -> Candidate | None:
+    """The first testable effect ranked after ``top`` that does not nest it (the nesting rule already put such an
+    effect behind, its extra part not nameable), if its held-out error is within ``TIE`` of ``top``'s: as good a
+    first as ``top``."""
+    after = [c for c in ranking[ranking.index(top) + 1:] if c.testable]
+    rival = next((c for c in after if top.effect not in get_effect(c.effect).nests), None)
+    if rival is None or not rival.heldout_error <= (1.0 + TIE) * top.heldout_error:
+        return None
+    return rival
 
 
 def nameable(c: Candidate, min_gain: float) -> bool:
