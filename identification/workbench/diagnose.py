@@ -44,7 +44,8 @@ counted) that removes no more error than the encoder's rounding (:mod:`.resoluti
 With ``missing_effect``, every other testable effect is scored again over the model with the named one (same
 blocks, checks and floor): the best, if the verdict could name it there, is the next to add
 (:attr:`~.verdict.Diagnosis.then`). Two effects hidden together often rank as the named one and its look-alikes
-over the base model; the second shows once the first is in.
+over the base model; the second shows once the first is in (:attr:`~.verdict.Diagnosis.shortlist`). Of two effects
+tied within ``TIE`` (:func:`~.verdict.tied_rival`), the one whose next effect leaves the smaller error is named.
 
 This module ranks the effects; the probes are in :mod:`.probes`, the result types and the verdict in
 :mod:`.verdict`.
@@ -54,7 +55,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 
 import numpy as np
@@ -72,7 +73,7 @@ from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
 from .resolution import quantisation_floor
-from .verdict import Candidate, Confusion, Diagnosis, nameable, recheck_probes, tied_rival, verdict_of
+from .verdict import Candidate, Confusion, Diagnosis, at_grid_edge, nameable, recheck_probes, tied_rival, verdict_of
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
 
@@ -201,17 +202,6 @@ def _full_fit(ds: Dataset, spec: ModelSpec, effect: Effect, loss: Loss, cache: d
     return m, error_of(ds.target - m.predict(ds.signals), ds.target, loss)
 
 
-def _grid_edge(effect: Effect, shape: Mapping[str, float], signals) -> bool:
-    if callable(effect.grid):
-        return False
-    grid = effect.grid_for(signals)
-    keys = [k for k in grid[0] if len({g[k] for g in grid}) > 1]
-    if len(keys) != 1 or len(grid) < 3:
-        return False
-    values = sorted({g[keys[0]] for g in grid})
-    return shape.get(keys[0]) in (values[0], values[-1])
-
-
 def diagnose(
     ds: Dataset,
     spec: ModelSpec,
@@ -289,7 +279,7 @@ def diagnose(
             consistent=consistent,
             shape=dict(shape),
             coefficient=coef,
-            at_grid_edge=_grid_edge(eff, shape, ds.signals),
+            at_grid_edge=at_grid_edge(eff, shape, ds.signals),
             testable=reason is None,
             reason=reason,
             family=eff.family,
@@ -439,7 +429,7 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
     shape = full.spec.terms[-1].shape
     return replace(best, shape=dict(shape), coefficient=full.coefficients[eff.name],
                    train_gain=1.0 - e_train / train0 if train0 > 0 else 0.0,
-                   at_grid_edge=_grid_edge(eff, shape, ds.signals))
+                   at_grid_edge=at_grid_edge(eff, shape, ds.signals))
 
 
 def _floor(ds: Dataset, loss: Loss) -> float:

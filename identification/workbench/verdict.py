@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from servotau.actuator import EXPERIMENTS, Excitation, get_effect
+from servotau.actuator import EXPERIMENTS, Effect, Excitation, get_effect
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
@@ -225,6 +225,18 @@ def tied_rival(ranking, top: Candidate) -> Candidate | None:
     if rival is None or not rival.heldout_error <= (1.0 + TIE) * top.heldout_error:
         return None
     return rival
+
+
+def at_grid_edge(effect: Effect, shape: Mapping[str, float], signals) -> bool:
+    """The chosen ``shape`` is the first or last value of a one-parameter grid (of 3 shapes or more)."""
+    if callable(effect.grid):
+        return False
+    grid = effect.grid_for(signals)
+    keys = [k for k in grid[0] if len({g[k] for g in grid}) > 1]
+    if len(keys) != 1 or len(grid) < 3:
+        return False
+    values = sorted({g[keys[0]] for g in grid})
+    return shape.get(keys[0]) in (values[0], values[-1])
 
 
 def nameable(c: Candidate, min_gain: float) -> bool:
