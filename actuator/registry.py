@@ -87,6 +87,9 @@ class Effect:
             into an acceleration only when no acceleration is given (on-line: the estimator's ``ddq``).
         experiments: The experiment that tells this effect from a look-alike, by the look-alike's name (each
             pair is written in one of its two effects' files; see :func:`experiments`).
+        phi_unit: Unit of the regressor ``phi``: ``"1"`` dimensionless, ``"target"`` the target's own unit, else a
+            unit (``"N m"``, ``"rad/s^2"``); the coefficient is in [target unit / unit of phi]. A mapping when the
+            unit depends on the shape: ``{form: unit}`` (e.g. ``thermal_drift``'s two forms). None: not given.
     """
 
     name: str
@@ -109,6 +112,7 @@ class Effect:
     online_signals: str = ""
     signal_substitutes: Mapping[str, str] = field(default_factory=dict)
     experiments: Mapping[str, str] = field(default_factory=dict)
+    phi_unit: str | Mapping[str, str] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() or self.name in RESERVED:
@@ -124,6 +128,8 @@ class Effect:
         object.__setattr__(self, "nests", tuple(self.nests))
         object.__setattr__(self, "signal_substitutes", dict(self.signal_substitutes))
         object.__setattr__(self, "experiments", dict(self.experiments))
+        if self.phi_unit is not None and not isinstance(self.phi_unit, str):
+            object.__setattr__(self, "phi_unit", dict(self.phi_unit))
         if self.family not in FAMILIES:
             raise IdentificationError(f"effect '{self.name}': family {self.family!r}: expected one of {FAMILIES}")
         if (self.fit_columns is None) != (self.fold is None):

@@ -283,3 +283,36 @@ def test_a_torque_constant_falling_with_heat_is_named_in_the_gain_form():
     d = diagnose(drop, parse_spec("coulomb", drop.signals), effects=["thermal_drift", "stribeck", "delay"])
     assert d.top.effect == "thermal_drift" and d.top.shape["gain"] == 1.0, d.message
     assert d.top.coefficient == pytest.approx(-0.05, rel=0.3)
+
+
+def _candidate(effect: str, gain: float):
+    from servotau.identification.workbench.verdict import Candidate
+
+    return Candidate(effect, gain, 1.0 - gain, gain, (gain,) * 4, True, {}, 1.0, False, True, None, "x")
+
+
+def test_the_shortlist_puts_the_next_to_add_second():
+    """Greedy forward selection: the first effect, then the best one over the model with it (its look-alikes, which
+    rank second over the base model, explain nothing more); without a next to add, the ranking's first two."""
+    from servotau.identification.workbench.verdict import Diagnosis
+
+    then = _candidate("cogging", 0.3)
+    ranking = (_candidate("coulomb", 0.5), _candidate("direction_gain", 0.45), _candidate("cogging", 0.1))
+    d = Diagnosis("missing_effect", None, ranking, {}, None, 0.1, then=then)
+    assert [c.effect for c in d.shortlist] == ["coulomb", "cogging"]
+    alone = Diagnosis("missing_effect", None, ranking, {}, None, 0.1)
+    assert [c.effect for c in alone.shortlist] == ["coulomb", "direction_gain"]
+
+
+def test_a_tied_rival_is_the_next_effect_within_tie_that_does_not_nest_the_first():
+    """A runner-up whose held-out error is within TIE of the first's is as good a first (diagnose then orders the two
+    by the error after their next effects); one that nests the first (the Stribeck curve, Coulomb) is no rival."""
+    from servotau.identification.workbench.verdict import TIE, tied_rival
+
+    first = _candidate("coulomb", 0.5)
+    tie = 1.0 - (1.0 + TIE / 2) * 0.5  # held-out error within TIE of the first's
+    assert tied_rival([first, _candidate("direction_gain", tie)], first).effect == "direction_gain"
+    assert tied_rival([first, _candidate("direction_gain", 0.45)], first) is None
+    assert tied_rival([first, _candidate("stribeck", 0.52), _candidate("cogging", 0.45)], first) is None
+    assert tied_rival([first, _candidate("stribeck", 0.52), _candidate("load_friction", tie)], first).effect == (
+        "load_friction")

@@ -84,6 +84,14 @@ def test_coefficient_units_follow_the_target_and_the_effect():
     from servotau.actuator.registry import effect_names
 
     assert all("per unit of phi" not in coefficient_unit(e, "rad", True) for e in effect_names())  # every effect
+    from servotau.actuator.registry import register_effect, unregister_effect
+
+    register_effect("torque_bump_unit", lambda s, w: s["tau"] / w, grid=[{"w": 1.0}], signals=("tau",),
+                    phi_unit="N m")  # a user's effect gives its unit in its registration
+    try:
+        assert coefficient_unit("torque_bump_unit", "rad", True) == "rad/(N m)"
+    finally:
+        unregister_effect("torque_bump_unit")
 
 
 def test_correlation_band_is_1_96_over_sqrt_n(report):

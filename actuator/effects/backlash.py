@@ -61,4 +61,5 @@ EFFECT = Effect(
     online_signals="tau, ddq (the estimator's acceleration; history: the last `lag` seconds of it)",
     signal_substitutes={"q": "ddq"},
     confusable=("elastic", "deadzone"),
+    phi_unit="rad/s^2",
 )

@@ -87,4 +87,5 @@ EFFECT = Effect(
     fold=fold,
     scalar=scalar,
     online_signals="q",
+    phi_unit="1",
 )

@@ -39,4 +39,5 @@ EFFECT = Effect(
     scalar=scalar,
     online_signals="dq",
     confusable=("deadzone", "stribeck"),
+    phi_unit="1",
 )

@@ -37,4 +37,5 @@ EFFECT = Effect(
     needs=needs,
     scalar=scalar,
     online_signals="dq",
+    phi_unit="1",
 )

@@ -75,4 +75,5 @@ EFFECT = Effect(
         "backlash": "small moves at constant slow speed under a steady load: the Dahl state follows the travel "
         "whatever the load, the play of a backlash is crossed only where the torque changes sign",
     },
+    phi_unit="1",
 )

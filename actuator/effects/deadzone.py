@@ -269,4 +269,5 @@ EFFECT = Effect(
         "coulomb": "hold still and push the joint through zero torque: Coulomb friction vanishes at rest, a dead "
         "zone does not",
     },
+    phi_unit="1",
 )

@@ -65,4 +65,5 @@ EFFECT = Effect(
         "motor_lag": "command steps or a chirp: a dead time shows a flat start and a phase lag growing linearly "
         "with frequency; a first-order lag responds at once and its phase saturates at 90 degrees",
     },
+    phi_unit="rad",
 )

@@ -42,4 +42,5 @@ EFFECT = Effect(
         "load_friction": "move in both directions under torques of both signs (push the limb while it moves): a "
         "direction gain follows the sign of u, load friction the magnitude |tau|",
     },
+    phi_unit="target",
 )

@@ -46,4 +46,5 @@ EFFECT = Effect(
         "delay": "command steps (or a chirp): a dead time shows a flat start, the rotor inertia a response to the "
         "acceleration from the first sample",
     },
+    phi_unit="rad/s^2",
 )

@@ -44,4 +44,5 @@ EFFECT = Effect(
     scalar=scalar,
     online_signals="tau, dq",
     confusable=("direction_gain",),
+    phi_unit="N m",
 )

@@ -84,4 +84,5 @@ EFFECT = Effect(
         "stiction": "hold, then move slowly by a small amount against the last move: LuGre friction changes "
         "continuously with the travel, stiction breaks away at once",
     },
+    phi_unit="1",
 )

@@ -57,4 +57,5 @@ EFFECT = Effect(
     online_signals="tau (history: a first-order lag)",
     coefficient_range=LAG_COEFFICIENT,
     confusable=("delay", "elastic"),
+    phi_unit="target",
 )

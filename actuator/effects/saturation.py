@@ -112,4 +112,5 @@ EFFECT = Effect(
     history=True,
     online_signals="tau, dq, q, q_des (history: the limit detector's state, the last command, the lead at the onset)",
     coefficient_range=SATURATION_COEFFICIENT,
+    phi_unit="rad",
 )

@@ -60,4 +60,5 @@ EFFECT = Effect(
         "backlash": "hold after moving in each direction under the same load, then reverse the load at rest: "
         "stiction keeps the sign of the last move, backlash follows the sign of the torque",
     },
+    phi_unit="1",
 )

@@ -55,4 +55,5 @@ EFFECT = Effect(
         "coulomb": "constant-velocity ramps at several speeds: the Stribeck excess fades with speed, Coulomb "
         "friction stays",
     },
+    phi_unit="1",
 )

@@ -65,4 +65,5 @@ EFFECT = Effect(
     history=True,
     online_signals="tau, dq (history: a first-order lag of the servo effort)",
     coefficient_range=THERMAL_COEFFICIENT,
+    phi_unit={"gain 0": "rad/s", "gain 1": "target"},
 )

@@ -59,4 +59,5 @@ EFFECT = Effect(
         "stribeck": "constant-velocity ramps at several slow speeds (0.01 to 0.3 rad/s): Stribeck friction falls "
         "from its breakaway level with speed, the power law only rises",
     },
+    phi_unit="1",
 )

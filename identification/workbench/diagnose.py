@@ -44,7 +44,8 @@ counted) that removes no more error than the encoder's rounding (:mod:`.resoluti
 With ``missing_effect``, every other testable effect is scored again over the model with the named one (same
 blocks, checks and floor): the best, if the verdict could name it there, is the next to add
 (:attr:`~.verdict.Diagnosis.then`). Two effects hidden together often rank as the named one and its look-alikes
-over the base model; the second shows once the first is in.
+over the base model; the second shows once the first is in (:attr:`~.verdict.Diagnosis.shortlist`). Of two effects
+tied within ``TIE`` (:func:`~.verdict.tied_rival`), the one whose next effect leaves the smaller error is named.
 
 This module ranks the effects; the probes are in :mod:`.probes`, the result types and the verdict in
 :mod:`.verdict`.
@@ -54,7 +55,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 
 import numpy as np
@@ -72,7 +73,7 @@ from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
 from .resolution import quantisation_floor
-from .verdict import Candidate, Confusion, Diagnosis, nameable, recheck_probes, verdict_of
+from .verdict import Candidate, Confusion, Diagnosis, at_grid_edge, nameable, recheck_probes, tied_rival, verdict_of
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
 
@@ -201,17 +202,6 @@ def _full_fit(ds: Dataset, spec: ModelSpec, effect: Effect, loss: Loss, cache: d
     return m, error_of(ds.target - m.predict(ds.signals), ds.target, loss)
 
 
-def _grid_edge(effect: Effect, shape: Mapping[str, float], signals) -> bool:
-    if callable(effect.grid):
-        return False
-    grid = effect.grid_for(signals)
-    keys = [k for k in grid[0] if len({g[k] for g in grid}) > 1]
-    if len(keys) != 1 or len(grid) < 3:
-        return False
-    values = sorted({g[keys[0]] for g in grid})
-    return shape.get(keys[0]) in (values[0], values[-1])
-
-
 def diagnose(
     ds: Dataset,
     spec: ModelSpec,
@@ -289,7 +279,7 @@ def diagnose(
             consistent=consistent,
             shape=dict(shape),
             coefficient=coef,
-            at_grid_edge=_grid_edge(eff, shape, ds.signals),
+            at_grid_edge=at_grid_edge(eff, shape, ds.signals),
             testable=reason is None,
             reason=reason,
             family=eff.family,
@@ -321,12 +311,31 @@ def diagnose(
     d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
     if d.verdict != "missing_effect" or not next_effect:
         return d
-    try:
-        then = _then(ds, spec, d.top, ranking, loss, folds, min_gain, cache)
-    except IdentificationError as exc_:
-        log.info("no next effect after %s: %s", d.top.effect, exc_)
-        return d
+    then = _then_or_none(ds, spec, d.top, ranking, loss, folds, min_gain, cache)
+    rival = tied_rival(ranking, d.top)
+    if rival is not None and nameable(rival, min_gain):
+        # the blocks do not order the two: the one whose next effect leaves the smaller error goes first
+        then_r = _then_or_none(ds, spec, rival, ranking, loss, folds, min_gain, cache)
+        if _two_steps(rival, then_r) < _two_steps(d.top, then):
+            ranking = [c for c in ranking if c is not rival]
+            ranking.insert(ranking.index(d.top), rival)
+            then = then_r
+            d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, then)
     return d if then is None else verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, then)
+
+
+def _then_or_none(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate], loss: Loss,
+                  folds: list[Fold], min_gain: float, cache: dict) -> Candidate | None:
+    try:
+        return _then(ds, spec, top, ranking, loss, folds, min_gain, cache)
+    except IdentificationError as exc_:
+        log.info("no next effect after %s: %s", top.effect, exc_)
+        return None
+
+
+def _two_steps(first: Candidate, then: Candidate | None) -> float:
+    """The held-out error with ``first`` and, if any, the next effect to add after it."""
+    return first.heldout_error if then is None else then.heldout_error
 
 
 def _order(c: Candidate) -> tuple:
@@ -420,7 +429,7 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
     shape = full.spec.terms[-1].shape
     return replace(best, shape=dict(shape), coefficient=full.coefficients[eff.name],
                    train_gain=1.0 - e_train / train0 if train0 > 0 else 0.0,
-                   at_grid_edge=_grid_edge(eff, shape, ds.signals))
+                   at_grid_edge=at_grid_edge(eff, shape, ds.signals))
 
 
 def _floor(ds: Dataset, loss: Loss) -> float:

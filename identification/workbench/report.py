@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from servotau.actuator import excitation_report
+from servotau.actuator import effect_names, excitation_report, get_effect
 
 from .data import Dataset, describe
 from .diagnose import Diagnosis
@@ -65,22 +65,21 @@ def _fit(c: Comparison) -> tuple[float, str]:
     return (c.heldout.fit_percent, "held-out") if c.heldout is not None else (c.train.fit_percent, "training")
 
 
-# Unit of each built-in effect's regressor phi (actuator/effects/<name>.py): "1" dimensionless, "target" the
-# target's own unit; a coefficient is in [target unit / unit of phi].
-PHI_UNITS = {"coulomb": "1", "coulomb_asym": "1", "stiction": "1", "stribeck": "1", "deadzone": "1", "cogging": "1",
-             "dahl": "1", "lugre": "1", "viscous_power": "1", "direction_gain": "target", "motor_lag": "target",
-             "load_friction": "N m", "delay": "rad", "elastic": "rad/s^2", "backlash": "rad/s^2", "saturation": "rad"}
-
-
 def coefficient_unit(name: str, si: str, effect: bool) -> str:
-    """Unit of coefficient ``name`` (k_tau, k_v, offset or an effect) of a model of a target in ``si``."""
+    """Unit of coefficient ``name`` (k_tau, k_v, offset or an effect) of a model of a target in ``si``; an effect's
+    from its regressor's unit (``Effect.phi_unit``, per form when the unit depends on the shape)."""
     if not effect:
         return {K_TAU: f"{si}/(N m)", K_V: f"{si}/(rad/s)", OFFSET: si}.get(name, "?")
-    if name == "thermal_drift":  # phi = h dq (shape gain 0) or -h u_tau (gain 1; u_tau in the target's unit)
-        return f"{si}/(rad/s) with gain 0, - with gain 1"
-    phi = PHI_UNITS.get(name)
+    phi = get_effect(name).phi_unit if name in effect_names() else None
     if phi is None:
         return f"{si} per unit of phi (actuator/effects/{name}.py)"
+    if isinstance(phi, str):
+        return _per(si, phi)
+    return ", ".join(f"{_per(si, unit)} with {form}" for form, unit in phi.items())
+
+
+def _per(si: str, phi: str) -> str:
+    """[si / phi]: ``phi`` "1" dimensionless, "target" the target's unit."""
     return si if phi == "1" else ("-" if phi == "target" or phi == si else f"{si}/({phi})")
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from servotau.actuator import EXPERIMENTS, Excitation, get_effect
+from servotau.actuator import EXPERIMENTS, Effect, Excitation, get_effect
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
@@ -39,6 +39,10 @@ carry two thirds of the squared error of the simulated default servo), hence the
 VERDICTS = ("missing_effect", "no_missing_effect", "unexplained", "cannot_tell")
 """``cannot_tell``: the log itself cannot decide (units doubted, a joint that never moves): every effect is
 untestable and the message says why."""
+
+TIE = 0.01
+"""Two effects whose held-out errors differ by less than this fraction tie: the blocks do not order them
+(:func:`tied_rival`)."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
@@ -162,6 +166,18 @@ class Diagnosis:
         return self.ranking[0] if self.ranking and self.ranking[0].testable else None
 
     @property
+    def shortlist(self) -> tuple[Candidate, ...]:
+        """The first two effects to add, in order (add one, watch the error fall, re-rank): the first testable
+        effect of the ranking, and second the next to add over the model with it (:attr:`then`, greedy forward
+        selection) when the first is the named effect. Two effects hidden together rank as the first one and its
+        look-alikes over the base model; the second shows once the first is in. Otherwise the ranking's first two
+        testable effects."""
+        tested = [c for c in self.ranking if c.testable]
+        if not tested or self.then is None or self.top is not tested[0]:
+            return tuple(tested[:2])
+        return tested[0], self.then
+
+    @property
     def runner_up(self) -> Candidate | None:
         top = self.top
         return next((c for c in self.ranking if c.testable and c is not top), None)
@@ -193,10 +209,34 @@ class Diagnosis:
             "tail_share": _r(self.tail_share),
             "checks": list(self.checks),
             "then": None if self.then is None else self.then.to_dict(),
+            "shortlist": [c.effect for c in self.shortlist],
             "train": self.base.train.to_dict(),
             "heldout": None if self.base.heldout is None else self.base.heldout.to_dict(),
             "excitation": self.excitation.to_dict(),
         }
+
+
+def tied_rival(ranking, top: Candidate) -> Candidate | None:
+    """The first testable effect ranked after ``top`` that does not nest it (the nesting rule already put such an
+    effect behind, its extra part not nameable), if its held-out error is within ``TIE`` of ``top``'s: as good a
+    first as ``top``."""
+    after = [c for c in ranking[ranking.index(top) + 1:] if c.testable]
+    rival = next((c for c in after if top.effect not in get_effect(c.effect).nests), None)
+    if rival is None or not rival.heldout_error <= (1.0 + TIE) * top.heldout_error:
+        return None
+    return rival
+
+
+def at_grid_edge(effect: Effect, shape: Mapping[str, float], signals) -> bool:
+    """The chosen ``shape`` is the first or last value of a one-parameter grid (of 3 shapes or more)."""
+    if callable(effect.grid):
+        return False
+    grid = effect.grid_for(signals)
+    keys = [k for k in grid[0] if len({g[k] for g in grid}) > 1]
+    if len(keys) != 1 or len(grid) < 3:
+        return False
+    values = sorted({g[keys[0]] for g in grid})
+    return shape.get(keys[0]) in (values[0], values[-1])
 
 
 def nameable(c: Candidate, min_gain: float) -> bool:

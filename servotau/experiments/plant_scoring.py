@@ -1,10 +1,12 @@
 """Score the model workbench on the independent plant family (:mod:`.plant_family`) as a confusion matrix.
 
-Per log: the hidden effect(s) (from the side dict), the workbench's verdict and its two best testable effects
-(``diagnose`` with the paper's base model, as ``servotau model diagnose LOG.csv`` runs it). Scores:
+Per log: the hidden effect(s) (from the side dict), the workbench's verdict and its first two effects to add
+(``Diagnosis.shortlist``: the first testable effect, then the next to add over the model with it when the first is
+named, else the runner-up; ``diagnose`` with the paper's base model, as ``servotau model diagnose LOG.csv`` runs
+it). Scores:
 
-- per hidden effect, ``top1`` / ``top2``: an accepted name of the effect is ranked first / first or second
-  (each effect of a pair is scored on its own);
+- per hidden effect, ``top1`` / ``top2``: an accepted name of the effect is first / first or second of the
+  shortlist (each effect of a pair is scored on its own);
 - ``named``: the verdict is ``missing_effect`` and the named effect is accepted;
 - ``steps2``: the effect is named, or it is the next to add once the named one is in the model
   (``Diagnosis.then``): the first two effects the workbench tells the user to add, in order;
@@ -79,7 +81,7 @@ def diagnose_log(ds) -> dict:
     except Exception as exc:  # a crash is a result, recorded
         return {"verdict": f"error: {type(exc).__name__}: {exc}"[:200], "ranked": [], "gains": [],
                 "seconds": time.perf_counter() - start}
-    top = [c for c in d.ranking if c.testable][:2]
+    top = d.shortlist
     named = d.top.effect if d.verdict == "missing_effect" else None  # what the verdict names (may be ranked second)
     return {"verdict": d.verdict, "named": named, "then": d.then.effect if d.then is not None else None,
             "ranked": [c.effect for c in top],
