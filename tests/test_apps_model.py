@@ -24,9 +24,10 @@ def run_json(capsys, argv):
 
 
 def test_diagnose_json_is_one_object_with_verdict_and_ranking(capsys, cogging_log):
-    """--json prints exactly one JSON object: verdict, ranking entries with effect and heldout_gain."""
+    """--json prints exactly one JSON object: verdict, shortlist, ranking entries with effect and heldout_gain."""
     out, err = run_json(capsys, ["model", "diagnose", str(cogging_log), "--base", "coulomb", "--json"])
     assert out["verdict"] == "missing_effect" and out["ranking"][0]["effect"] == "cogging"
+    assert out["shortlist"][0] == "cogging" and len(out["shortlist"]) <= 2  # the first two effects to add
     assert all({"effect", "heldout_gain"} <= set(r) for r in out["ranking"])
     assert out["ranking"][0]["heldout_gain"] > 0.8 and "[" in err and "cogging" in err  # progress on stderr
 

@@ -73,8 +73,8 @@ def test_a_bad_field_names_the_file_the_phase_and_the_field(tmp_path):
 
 def test_gains_per_phase_are_converted_per_joint_and_bad_ones_refused_naming_the_phase(tmp_path, robot):
     """Each torque phase has its own gains (K6 = 0.5 then 0.25: k_s per joint from its motor model); gains in a
-    position phase, a gain the controller refuses (k6 = 0 with control.toml's k7_scaling = "inverse_sqrt_k6") or a
-    user task's unknown or negative gain are refused, naming the phase and the field, before anything moves."""
+    position phase or a user task's unknown or negative gain are refused, naming the phase and the field, before
+    anything moves (gains the identified model predicts unstable: the next test)."""
     from servotau.control.tasks import Phase
     from servotau.control.tasks.references import Hold
 
@@ -104,8 +104,6 @@ def test_gains_per_phase_are_converted_per_joint_and_bad_ones_refused_naming_the
             i = robot[0].joint_index(j)
             assert m.k_tau * (1 + g.k_p[i]) * g.k_s[i] == pytest.approx(k6)
     assert runner.gains[2] is None  # a position phase keeps the gains in use
-    with pytest.raises(ConfigError, match=r'phase "b": gains \{\'k6\': 0.0\}: .*k7_scaling'):
-        TaskRunner(FileTask(load_task(write(tmp_path, text.format(k6=0.0)))), robot[0]).prepare(robot[1])
 
     class Mine:
         name, settle, ft_offsets, source = "mine", 0.5, "calibrate", "mine.py"
@@ -120,6 +118,36 @@ def test_gains_per_phase_are_converted_per_joint_and_bad_ones_refused_naming_the
         TaskRunner(Mine({"k9": 1.0}), robot[0]).prepare(robot[1])
     with pytest.raises(ConfigError, match=r'mine.py: phase "soft": gain k_s = -1.0: expected a finite number >= 0'):
         TaskRunner(Mine({"k_s": -1.0}), robot[0]).prepare(robot[1])
+
+
+def test_phase_gains_are_scheduled_and_a_loop_the_model_predicts_unstable_is_refused(robot):
+    """A phase's velocity gain (k7 or k_d) replaces control.toml's k7_per_k_v; k_p follows the margin schedule
+    (gain_schedule = "margin"); K7 = 0 leaves the servo's damping cancelled by the k_v feedforward, which the
+    identified model predicts unstable: refused naming the phase, the motor file and the joint, before anything
+    moves."""
+    from servotau.control.tasks import Phase
+    from servotau.control.tasks.references import Hold
+
+    class Mine:
+        name, settle, ft_offsets, source = "mine", 0.5, "calibrate", "mine.py"
+
+        def __init__(self, gains):
+            self.gains = gains
+
+        def phases(self, info, q):
+            return [Phase("soft", Hold(q), "torque", 0.1, gains=self.gains)]
+
+    info, q = robot
+    runner = TaskRunner(Mine({"k6": 1.0, "k7": 0.01}), info)
+    runner.prepare(q)
+    motors, (g,) = runner.manager().config.motors, runner.gains
+    for j, m in motors.items():
+        i = info.joint_index(j)
+        assert g.k_p[i] in (0.0, 0.125, 0.25, 0.5)  # control.toml's k_p = 0.5, halved where the margin is short
+        assert m.k_tau * (1 + g.k_p[i]) * g.k_d[i] == pytest.approx(0.01)  # K7 as given
+    with pytest.raises(ConfigError, match=r'mine.py: phase "soft": .*hrp2_sim_deadband.toml: joint '
+                                                r'"RLEG_JOINT\d".*predicts an unstable torque loop'):
+        TaskRunner(Mine({"k6": 1.0, "k7": 0.0}), info).prepare(q)
 
 
 def test_an_unknown_joint_is_refused_naming_it(tmp_path, robot):

@@ -22,9 +22,10 @@ from servotau.errors import ConfigError, ControlError
 from servotau.hal.types import RobotInfo
 
 from ..config import DEFAULT_PATH, ControlConfig, SafetyLimits
+from ..tuning import check_predicted_stable, schedule_gains
 from .lag import VELOCITY_MARGIN, LagModel, check_lag
 from .references import Hold, JerkLimited, JointReference, MinJerk, Sinusoids, Tabled, waypoint_targets
-from .spec import GAIN_KEYS, ForceSpec, TaskSpec, load_task
+from .spec import GAIN_GROUPS, GAIN_KEYS, ForceSpec, TaskSpec, load_task
 from .table import load_table
 
 START_TOLERANCE = 0.01  # [rad] an absolute trajectory table must start this close to the posture at its phase
@@ -262,18 +263,20 @@ def check_phase_gains(task: Task, p: Phase) -> None:
             raise ConfigError(f"{where}: gain {key!r}: expected one of {list(GAIN_KEYS)}")
         if isinstance(value, bool) or not isinstance(value, int | float) or not (math.isfinite(value) and value >= 0):
             raise ConfigError(f"{where}: gain {key} = {value!r}: expected a finite number >= 0")
-    for a, b in (("k6", "k_s"), ("k7", "k_d")):
-        if a in p.gains and b in p.gains:
-            raise ConfigError(f"{where}: gains {a} and {b}: expected either, not both")
+    for group in GAIN_GROUPS:
+        given = [k for k in group if k in p.gains]
+        if len(given) > 1:
+            raise ConfigError(f"{where}: gains {' and '.join(given)}: expected one of {' or '.join(group)}")
     if p.gains and p.mode != "torque":
         raise ConfigError(f'{where}: gains {dict(p.gains)} in a {p.mode} phase: expected mode = "torque" (or no gains)')
 
 
 def phase_gains(task: Task, phases: Sequence[Phase], info: RobotInfo, path: str | Path = DEFAULT_PATH,
-                cache: dict | None = None) -> list[PhaseGains | None]:
+                cache: dict | None = None, posture=None) -> list[PhaseGains | None]:
     """The gains of each phase (None for a position phase): control.toml's (``path``) with the phase's ``gains`` on
-    top, converted per joint as the file's own are (k6, k7, k7_per_k_v, k7_scaling). ``cache``: gain sets already
-    converted (by their items), kept between calls.
+    top, converted per joint as the file's own are (k6, k7, k7_per_k_v, k7_scaling), k_p scheduled and the loop
+    checked at ``posture`` [rad] (:func:`task_control_config`). ``cache``: gain sets already converted (by their
+    items, at the posture of their first call), kept between calls.
 
     Raises:
         ConfigError: A gain the controller refuses, naming the task, the phase, and the file's field or the joint.
@@ -288,7 +291,8 @@ def phase_gains(task: Task, phases: Sequence[Phase], info: RobotInfo, path: str 
         key = tuple(sorted(dict(p.gains).items()))
         if key not in cache:
             try:
-                config = task_control_config(info, dict(p.gains), None, path, file=f'{task.source} phase "{p.name}"')
+                config = task_control_config(info, dict(p.gains), None, path, file=f'{task.source} phase "{p.name}"',
+                                             posture=posture)
             except (ConfigError, ControlError) as exc:
                 raise ConfigError(f'{task.source}: phase "{p.name}": gains {dict(p.gains)}: {exc}') from None
             g = PhaseGains(*(config.joint_vector(k) for k in ("k_p", "k_s", "k_d")))
@@ -303,8 +307,15 @@ def phase_gains(task: Task, phases: Sequence[Phase], info: RobotInfo, path: str 
 
 
 def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: ForceSpec | None,
-                        path: str | Path = DEFAULT_PATH, *, file: str = "") -> ControlConfig:
-    """config/control.toml (or ``path``) with ``gains`` for every torque joint and the ``force`` task."""
+                        path: str | Path = DEFAULT_PATH, *, file: str = "", posture=None) -> ControlConfig:
+    """config/control.toml (or ``path``) with ``gains`` for every torque joint and the ``force`` task; k_p scheduled
+    from the identified model's margin at ``posture`` (n,) [rad] (None: the model's neutral posture) when the file
+    says ``gain_schedule = "margin"``, then the predicted loop checked (control/tuning.py).
+
+    Raises:
+        ConfigError: The file or the gains are refused; :class:`~..tuning.UnstableLoopError` when the identified
+            model predicts an unstable torque loop (naming the motor file, the joint and the gains).
+    """
     root = load_toml(path)
     data = copy.deepcopy(dict(root.data))
     if isinstance(data.get("motors"), str):  # next to the file read (from_mapping knows no file to look beside)
@@ -314,14 +325,16 @@ def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: Forc
             pass  # from_mapping names the field and the places looked
     if gains:
         defaults = data.setdefault("defaults", {})
-        pairs = {"k6": "k_s", "k_s": "k6", "k7": "k_d", "k_d": "k7"}
-        for key, value in gains.items():
+        for key, value in gains.items():  # the phase's form of a gain replaces every form of it in the file
+            group = next((g for g in GAIN_GROUPS if key in g), (key,))
             for table in (defaults, *data.get("joints", {}).values()):
-                table.pop(key, None)
-                table.pop(pairs.get(key, ""), None)
+                for k in group:
+                    table.pop(k, None)
             defaults[key] = value
     if force is not None:
         data["force"] = {"sensor": force.sensor, "frame": force.frame, "offset": list(force.offset),
                          "axes": list(force.axes), "k_f": list(force.k_f)}
     label = f"{root.file} with the gains of {file or 'the task'}" if gains or force is not None else root.file
-    return ControlConfig.from_mapping(data, info, file=label)
+    config = schedule_gains(ControlConfig.from_mapping(data, info, file=label), info, posture=posture)
+    check_predicted_stable(config, info, str(data.get("motors")), posture=posture)  # before anything moves
+    return config

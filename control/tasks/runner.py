@@ -149,7 +149,7 @@ class TaskRunner(LoopHook):
             raise ConfigError(f"{task.source}: force task {force} differs from the run's "
                               f"{self._force[0] if self._force else None}: expected the same (the controller's force "
                               "task is fixed for a run)")
-        gains = phase_gains(task, phases, self.info, self.control_path, self._gain_cache)
+        gains = phase_gains(task, phases, self.info, self.control_path, self._gain_cache, q_start)
         if self._lag is None:
             self._lag = LagModel(self.info, config.motors, config.base, self.encoders)
         check_feasible(task, phases, self.info, config.safety, self._lag)

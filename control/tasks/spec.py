@@ -21,7 +21,11 @@ from ..config import AXES
 KINDS = ("hold", "sinusoid", "growing_sinusoid", "waypoints", "table")
 MODES = ("position", "torque")
 PROFILES = ("jerk_limited", "min_jerk")
-GAIN_KEYS = ("k6", "k_s", "k7", "k_d", "k_p")
+GAIN_KEYS = ("k6", "k_s", "k7", "k_d", "k7_per_k_v", "k_p")
+"""A phase's gains: the stiffness as k6 [-] or k_s [N m/rad]; the velocity gain as k7 [s], k_d [N m s/rad] or
+k7_per_k_v [-] (k7 = k7_per_k_v k_v of each joint's motor model); k_p [-]."""
+GAIN_GROUPS = (("k6", "k_s"), ("k7", "k_d", "k7_per_k_v"))
+"""Forms of one gain: a phase gives at most one of each group, and it replaces control.toml's."""
 V_MAX, A_MAX, J_MAX = 1.0, 5.0, 50.0  # [rad/s, rad/s^2, rad/s^3] default bounds of a jerk-limited move
 
 
@@ -161,10 +165,11 @@ def _phase(s: Section, folder: Path) -> PhaseSpec:
     mode = s.str("mode", "position", choices=MODES)
     duration = s.float("duration", unit="s", min=0.0, strict_min=True) if "duration" in s else None
     gains = {k: s.float(k, min=0.0, unit={"k6": "-", "k7": "s", "k_s": "N m/rad", "k_d": "N m s/rad",
-                                            "k_p": "-"}[k]) for k in GAIN_KEYS if k in s}
-    for a, b in (("k6", "k_s"), ("k7", "k_d")):
-        if a in gains and b in gains:
-            raise s.error(b, gains[b], f"either {a} or {b}, not both")
+                                            "k7_per_k_v": "-", "k_p": "-"}[k]) for k in GAIN_KEYS if k in s}
+    for group in GAIN_GROUPS:
+        given = [k for k in group if k in gains]
+        if len(given) > 1:
+            raise s.error(given[1], gains[given[1]], f"one of {' or '.join(group)}, not {' and '.join(given)}")
     if gains and mode != "torque":
         key = next(iter(gains))
         raise s.error(key, gains[key], 'no gains in a position phase (mode = "torque" takes them)')

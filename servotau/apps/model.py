@@ -323,7 +323,7 @@ def _comparison_dict(c) -> dict:
 
 def _diagnosis_dict(d) -> dict:
     full = d.to_dict()
-    keep = ("verdict", "message", "min_gain", "ranking", "runner_up", "probes", "confusion", "untestable",
+    keep = ("verdict", "message", "min_gain", "shortlist", "ranking", "runner_up", "probes", "confusion", "untestable",
             "experiments", "tail_share", "excitation")
     out = {k: full[k] for k in keep}
     out["diagnosed_model"] = full["model"]
