@@ -14,7 +14,8 @@ import time
 
 import numpy as np
 
-from servotau.control.loop import ESTIMATOR_VARIANT, ControlLoop, LoopHook
+from servotau.control.estimator_variant import ESTIMATOR_VARIANT
+from servotau.control.loop import ControlLoop, LoopHook
 from servotau.control.position_integral import PositionIntegral
 from servotau.hal.backends.inprocess import InProcessBackend
 from servotau.simrobot.sim import SimConfig, SimRobot

@@ -177,7 +177,8 @@ class ControlConfig:
     # control/stability.py)
     position_feedback: str = setting("estimate", choices=("estimate", "encoder"))
     # k_p per joint: "fixed" = as configured; "margin" = lowered (halved, then 0) until the identified model's
-    # loop keeps a margin on servos that differ from it (control/tuning.py, applied by the experiments)
+    # loop keeps a margin on servos that differ from it (control/tuning.py tuned(), applied to every controller built
+    # from a file: ControlManager.from_toml, tasks, experiments)
     gain_schedule: str = setting("fixed", choices=("fixed", "margin"))
     source: str = "<direct>"  # file the config came from
     _torque_mask: np.ndarray = field(default=None, repr=False, compare=False)

@@ -53,9 +53,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from servotau.errors import ServotauError
-from servotau.estimation import Estimate, EstimatorConfig, FtOffsetAverage, TorqueEstimator
+from servotau.estimation import Estimate, FtOffsetAverage, TorqueEstimator
 from servotau.hal.types import SensorFrame
 
+from .estimator_variant import estimator_config
 from .manager import ControlManager, Mode
 from .operator import OperatorChannel
 from .safety import SafetyReport
@@ -66,12 +67,6 @@ log = logging.getLogger(__name__)
 
 SETTLE = 0.5  # [s] in position mode before the run's mode: filters fill, F/T offsets are calibrated
 DETAIL_TICKS = 100  # the operator's status detail (robot time, mode, phase) is refreshed every this many ticks
-ESTIMATOR_VARIANT = "low_delay"  # the estimator variant the torque controller is stable with in simulation
-
-
-def estimator_config() -> EstimatorConfig:
-    """config/estimation.toml with the loop's variant (:data:`ESTIMATOR_VARIANT`)."""
-    return EstimatorConfig.from_toml(variant=ESTIMATOR_VARIANT)
 
 
 @dataclass

@@ -116,8 +116,14 @@ class ControlManager:
 
     @classmethod
     def from_toml(cls, info: RobotInfo, path: str | Path = DEFAULT_PATH) -> ControlManager:
-        """Manager for ``info`` with the settings of ``path`` (default ``config/control.toml``)."""
-        return cls(info, ControlConfig.from_toml(path, info))
+        """Manager for ``info`` with the settings of ``path`` (default ``config/control.toml``), k_p scheduled and
+        the predicted loop checked at the model's neutral posture (:func:`~.tuning.tuned`)."""
+        from servotau.config import load_toml
+
+        from .tuning import tuned
+
+        motors = str(load_toml(path).data.get("motors"))
+        return cls(info, tuned(ControlConfig.from_toml(path, info), info, motors))
 
     # -- state -------------------------------------------------------------------------------------
     @property

@@ -4,7 +4,9 @@
 joint's inertia and the share of it beyond an F/T sensor at the start posture, the estimator's encoder and F/T
 filters, the config's contacts and position feedback); :func:`predicted_radii` returns each loop's spectral radius
 at the configured k_p, K6 and K7; :func:`check_predicted_stable` refuses a config whose model predicts a loop that
-grows faster than :data:`RHO_MAX` per period, naming the motor file, the joint and the fields.
+grows faster than :data:`RHO_MAX` per period, naming the motor file, the joint and the fields; :func:`tuned` does
+both, for every path that builds the controller from a config file (``ControlManager.from_toml``, tasks,
+experiments).
 
 :func:`schedule_gains` (``gain_schedule = "margin"``) lowers each joint's k_p (halved, then 0) until the worst
 radius over servos that differ from the model (:data:`~.stability.MISMATCH`) is at most :data:`RHO_TARGET`,
@@ -136,8 +138,22 @@ def schedule_gains(config, info, estimator=None, posture=None):
     return dataclasses.replace(config, gains=gains)
 
 
+def tuned(config, info, motors_file: str, posture=None, estimator=None):
+    """``config`` as the controller runs it: k_p scheduled (:func:`schedule_gains`, when the config says
+    ``gain_schedule = "margin"``), then checked (:func:`check_predicted_stable`, naming ``motors_file``), at
+    ``posture`` (n,) [rad] (None: the model's neutral posture). Every path that builds the controller from a
+    config file goes through this.
+
+    Raises:
+        UnstableLoopError: The identified model predicts an unstable torque loop at the gains.
+    """
+    config = schedule_gains(config, info, estimator, posture)
+    check_predicted_stable(config, info, motors_file, estimator, posture)
+    return config
+
+
 def _estimator():
     """The control loop's estimator config (its variant's filters)."""
-    from .loop import estimator_config
+    from .estimator_variant import estimator_config
 
     return estimator_config()

@@ -53,6 +53,9 @@ class Faulty:
         self.writes += 1
         self.inner.write(q_des)
 
+    def set_hold(self, on):
+        self.inner.set_hold(on)
+
     @property
     def robot_state(self):
         """``servo_off`` for the robot ticks in ``servo_off`` (a robot-side trip), else the robot's own."""
@@ -96,6 +99,7 @@ class Recorder(LoopHook):
         self.backend, self.operator = backend, operator
         self.rows = []  # (robot tick, mode, q_des, truth q, torque terms all zero, integrals)
         self.trips = []
+        self.hold_flags = []  # (robot tick, the robot's firmware holding on the controller's COMMAND_HOLD)
 
     def on_tick(self, tick):
         i = tick.frame.seq - self.backend.seq0
@@ -107,6 +111,7 @@ class Recorder(LoopHook):
         q_true = tick.truth.q.copy() if tick.truth is not None else np.full(len(t.q_des), np.nan)
         self.rows.append((i, t.mode, t.q_des.copy(), q_true, zero,
                           law.torque.integral.copy(), law.position_integral.i_q.copy()))
+        self.hold_flags.append((i, self.backend.inner.firmware.hold_commanded))  # the robot holds on COMMAND_HOLD
 
     def tripped(self, tick, report):
         self.trips.append((tick.frame.seq - self.backend.seq0, report.check, report.where))
@@ -167,6 +172,9 @@ def test_a_trip_latches_a_hold_that_answers_every_frame_until_reset_and_release(
         np.testing.assert_allclose(q_des, q_hold, atol=1e-12)  # position control at the held posture
         assert np.abs(q_true - q_hold).max() < 0.005, i
     assert loop.manager.mode.value == "position" and not loop.manager.tripped
+    flags = dict(rec.hold_flags)  # the robot holds on the loop's COMMAND_HOLD from the trip to the reset
+    assert not any(flags[i] for i in range(nan_from))
+    assert all(flags[i] for i in range(nan_from + 1, 401)) and not any(flags[i] for i in range(402, 601))
 
 
 def test_hold_timeout_releases_by_itself_after_that_much_robot_time():

@@ -233,6 +233,47 @@ def test_the_operator_starts_another_task_from_rest(tmp_path):
     assert len(builders) == 3 and loop_thread[0] not in builders  # 2 reads, 1 build (the bad task is not read)
 
 
+def test_a_start_whose_build_raises_anything_or_hangs_is_refused_and_the_run_goes_on(monkeypatch):
+    """A user's task that raises SystemExit while it is built, or never finishes building: the start is refused
+    with the reason (the second after START_BUILD_LIMIT of robot time), the worker never blocks the loop, and the
+    running task (a hold) goes on until stopped."""
+    import servotau.control.tasks.runner as runner_module
+
+    monkeypatch.setattr(runner_module, "START_BUILD_LIMIT", 0.05)
+    channel, answers, never = OperatorChannel(), {}, threading.Event()
+
+    def resolve(name):
+        if name == "exits":
+            raise SystemExit(2)
+        never.wait(30)  # "hangs": released at the end of the test
+        raise RuntimeError("late")
+
+    def ask(key, name):
+        answers[key] = threading.Thread(target=lambda: answers.setdefault(key + "_answer",
+                                                                           channel.request("start", 30, task=name)))
+        answers[key].start()
+
+    def at(tick):
+        if tick.t >= 0.05 and "exits" not in answers:
+            ask("exits", "exits")
+        if "exits_answer" in answers and "hangs" not in answers:
+            ask("hangs", "hangs")
+        if "hangs_answer" in answers and "stop" not in answers:  # the hold runs until stopped
+            answers["stop"] = channel.post("stop")
+
+    monkeypatch.setattr(TaskRunner.__init__, "__kwdefaults__", {**TaskRunner.__init__.__kwdefaults__,
+                                                                 "resolve": resolve})
+    try:
+        result, runner, _, _ = run(FileTask.load("hold").shortened(0.5, settle=SETTLE), operator=channel,
+                                   hooks=[Record(at=at)])
+    finally:
+        never.set()
+    answers["hangs"].join(10)
+    assert not answers["exits_answer"].ok and "SystemExit" in answers["exits_answer"].error
+    assert not answers["hangs_answer"].ok and "not built within 0.05 s of robot time" in answers["hangs_answer"].error
+    assert result.end == "stopped" and result.tripped is None and runner.task.name == "hold"
+
+
 REST = """
 name = "rest"
 [[phases]]

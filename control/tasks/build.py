@@ -22,7 +22,7 @@ from servotau.errors import ConfigError, ControlError
 from servotau.hal.types import RobotInfo
 
 from ..config import DEFAULT_PATH, ControlConfig, SafetyLimits
-from ..tuning import check_predicted_stable, schedule_gains
+from ..tuning import tuned
 from .lag import VELOCITY_MARGIN, LagModel, check_lag
 from .references import Hold, JerkLimited, JointReference, MinJerk, Sinusoids, Tabled, waypoint_targets
 from .spec import GAIN_GROUPS, GAIN_KEYS, ForceSpec, TaskSpec, load_task
@@ -276,7 +276,7 @@ def phase_gains(task: Task, phases: Sequence[Phase], info: RobotInfo, path: str 
     """The gains of each phase (None for a position phase): control.toml's (``path``) with the phase's ``gains`` on
     top, converted per joint as the file's own are (k6, k7, k7_per_k_v, k7_scaling), k_p scheduled and the loop
     checked at ``posture`` [rad] (:func:`task_control_config`). ``cache``: gain sets already converted (by their
-    items, at the posture of their first call), kept between calls.
+    items and the posture to 1 mrad), kept between calls.
 
     Raises:
         ConfigError: A gain the controller refuses, naming the task, the phase, and the file's field or the joint.
@@ -288,7 +288,8 @@ def phase_gains(task: Task, phases: Sequence[Phase], info: RobotInfo, path: str 
         if p.mode != "torque":
             out.append(None)
             continue
-        key = tuple(sorted(dict(p.gains).items()))
+        key = (tuple(sorted(dict(p.gains).items())),
+               None if posture is None else np.round(np.asarray(posture, dtype=float), 3).tobytes())
         if key not in cache:
             try:
                 config = task_control_config(info, dict(p.gains), None, path, file=f'{task.source} phase "{p.name}"',
@@ -330,11 +331,13 @@ def task_control_config(info: RobotInfo, gains: Mapping[str, float], force: Forc
             for table in (defaults, *data.get("joints", {}).values()):
                 for k in group:
                     table.pop(k, None)
+                if group == GAIN_GROUPS[1]:  # a phase's velocity gain is the one it runs with (no K6 scaling)
+                    table.pop("k7_scaling", None)
             defaults[key] = value
+            if group == GAIN_GROUPS[1]:
+                defaults["k7_scaling"] = "constant"
     if force is not None:
         data["force"] = {"sensor": force.sensor, "frame": force.frame, "offset": list(force.offset),
                          "axes": list(force.axes), "k_f": list(force.k_f)}
     label = f"{root.file} with the gains of {file or 'the task'}" if gains or force is not None else root.file
-    config = schedule_gains(ControlConfig.from_mapping(data, info, file=label), info, posture=posture)
-    check_predicted_stable(config, info, str(data.get("motors")), posture=posture)  # before anything moves
-    return config
+    return tuned(ControlConfig.from_mapping(data, info, file=label), info, str(data.get("motors")), posture)

@@ -45,6 +45,7 @@ from .spec import Wave
 log = logging.getLogger(__name__)
 
 GAIN_RAMP = 0.1  # [s] a torque phase's gains replace the previous phase's over this time from its start (law.py)
+START_BUILD_LIMIT = 10.0  # [s] of robot time an operator's start may take to build; then it is refused
 
 
 
@@ -232,8 +233,11 @@ class TaskRunner(LoopHook):
         self.progress(f"phase {index + 1}/{len(self.phases)} {p.name}: {p.mode} mode, {length}")
 
     def before_control(self, tick: Tick) -> None:
-        if self._job is not None and self._job.result.done():
-            self._adopt(tick)
+        if self._job is not None:
+            if self._job.result.done():
+                self._adopt(tick)
+            elif tick.t - self._job.t0 > START_BUILD_LIMIT:  # a build that hangs: refused, the worker is left
+                self._refuse(self._job, f"not built within {START_BUILD_LIMIT:g} s of robot time")
         manager = self.manager()
         if manager.config.force is None or self._f_meas is None:
             return
@@ -277,7 +281,7 @@ class TaskRunner(LoopHook):
         stop, refusal = self._stop_from(tick, name)
         if refusal is not None:
             return refusal
-        self._job = _StartJob(name, stop.q1, Deferred())
+        self._job = _StartJob(name, stop.q1, Deferred(), tick.t)
         self._job.launch(lambda: self.build(self.resolve(name), stop.q1))
         return self._job.answer
 
@@ -304,12 +308,7 @@ class TaskRunner(LoopHook):
         try:
             plan = job.result.result()
         except ServotauError as exc:
-            self._job = None
-            if job.stage == 2:  # the reference is coming to rest: it stays there
-                self.phases, self.gains = [*self.phases[:1], Phase("rest", Hold(job.q1), self.phases[0].mode)], []
-                job.answer.finish(f"start {job.name}: {exc} (the reference rests where it stopped)")
-            else:
-                job.answer.finish(f"start {job.name}: {exc}")
+            self._refuse(job, str(exc))
             return
         stop, refusal = self._stop_from(tick, job.name)
         if job.stage == 1 and refusal is not None:
@@ -325,16 +324,27 @@ class TaskRunner(LoopHook):
             job.answer.finish(None)
             log.info("operator: task %s started", job.name)
             return
-        job.stage, job.q1 = 2, stop.q1  # the reference moved since the request: built again where it now rests
+        job.stage, job.q1, job.t0 = 2, stop.q1, tick.t  # the reference moved: built again where it now rests
         job.launch(lambda: self.build(plan.task, stop.q1))
+
+    def _refuse(self, job: _StartJob, why: str) -> None:
+        """Answer the operator's start with a refusal (loop thread); in stage 2 the reference rests where it
+        stopped."""
+        self._job = None
+        if job.stage == 2:  # the reference is coming to rest: it stays there
+            self.phases, self.gains = [*self.phases[:1], Phase("rest", Hold(job.q1), self.phases[0].mode)], []
+            job.answer.finish(f"start {job.name}: {why} (the reference rests where it stopped)")
+        else:
+            job.answer.finish(f"start {job.name}: {why}")
 
 
 class _StartJob:
     """An operator's ``start`` being built by a worker thread: stage 1 on the rest posture at the request, stage 2
     (if the reference moved) on the rest posture of the stop begun when stage 1 was done."""
 
-    def __init__(self, name: str, q1: np.ndarray, answer: Deferred):
+    def __init__(self, name: str, q1: np.ndarray, answer: Deferred, t0: float):
         self.name, self.q1, self.answer, self.stage = name, q1, answer, 1
+        self.t0 = t0  # [s] robot time the build of this stage began
         self.result: Future = Future()
 
     def launch(self, build: Callable[[], Plan]) -> None:
@@ -345,7 +355,7 @@ class _StartJob:
                 self.result.set_result(build())
             except ServotauError as exc:
                 self.result.set_exception(exc)
-            except Exception as exc:  # a user's task class: whatever it raises is a refusal, not a dead worker
+            except BaseException as exc:  # a user's task class: whatever it raises (SystemExit too) is a refusal
                 self.result.set_exception(ConfigError(f"{type(exc).__name__}: {exc}"))
 
         threading.Thread(target=work, name=f"task-build {self.name}", daemon=True).start()

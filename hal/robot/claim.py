@@ -113,6 +113,8 @@ def claim_with_retry(ask: Callable[[float], bytes | None], robot: str, timeout: 
     session yet (:class:`ClaimUnseen`: through a router, the session's token can reach the robot after the claim) is
     sent again, at most ``attempts`` times in all, waiting ``delay`` [s], doubling, in between, within ``timeout``;
     then :class:`ClaimRefused` says so. Any other refusal is raised at once."""
+    if attempts < 1:
+        raise ValueError(f"claim_with_retry: attempts = {attempts!r}: expected at least 1")
     t0 = time.monotonic()
     deadline = t0 + timeout
     for i in range(attempts):

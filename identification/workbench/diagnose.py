@@ -320,7 +320,8 @@ def diagnose(
             ranking = [c for c in ranking if c is not rival]
             ranking.insert(ranking.index(d.top), rival)
             then = then_r
-            d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, then)
+            if then is None:
+                return verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, None)
     return d if then is None else verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, then)
 
 

@@ -96,7 +96,7 @@ def hal_config(files: ConfigFiles) -> Section:
 
 def torque_estimator(files: ConfigFiles, info):
     """The torque estimator of the control loop (``estimation.toml``, the loop's variant) for the robot ``info``."""
-    from servotau.control.loop import ESTIMATOR_VARIANT
+    from servotau.control.estimator_variant import ESTIMATOR_VARIANT
     from servotau.estimation import EstimatorConfig, TorqueEstimator
 
     return TorqueEstimator(info, EstimatorConfig.from_toml(files.path(ESTIMATION.name), variant=ESTIMATOR_VARIANT))

@@ -80,7 +80,7 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
     config says ``gain_schedule = "margin"``, then checked (control/tuning.py)."""
     from servotau.config import CONFIG_DIR, load_toml
     from servotau.control import ControlConfig
-    from servotau.control.tuning import check_predicted_stable, schedule_gains
+    from servotau.control.tuning import tuned
 
     data = copy.deepcopy(load_toml(CONFIG_DIR / "control.toml").data)
 
@@ -108,9 +108,7 @@ def control_config(info, k6: float | None, force_axes: tuple[str, ...], k7: floa
         data["force"] = {"sensor": "right_ankle", "frame": "ft_right_ankle", "offset": [0.0, 0.0, -0.02],
                          "axes": list(force_axes), "k_f": [FORCE_KF] * len(force_axes)}
     config = ControlConfig.from_mapping(data, info, file="config/control.toml (experiment overrides)")
-    config = schedule_gains(config, info, posture=posture)
-    check_predicted_stable(config, info, str(data["motors"]), posture=posture)  # before anything moves
-    return config
+    return tuned(config, info, str(data["motors"]), posture)  # before anything moves
 
 
 def motors_file() -> str:

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from servotau.control.loop import ESTIMATOR_VARIANT, SETTLE
+from servotau.control.estimator_variant import ESTIMATOR_VARIANT
+from servotau.control.loop import SETTLE
 
 from .common import HOLD, LEG_LABELS, PAPER_MODEL, SEED, TAIL, WORKBENCH_MODEL, markdown, motors_file
 from .force import FORCE_AXES
