@@ -258,6 +258,7 @@ def test_the_next_effect_to_add_is_scored_over_the_model_with_the_named_one():
     assert "coulomb removes a further" in d.message and d.to_dict()["then"]["effect"] == "coulomb"
 
 
+@pytest.mark.slow  # 8 s (the default suite's budget); the offset's own tests stay in it
 def test_a_constant_error_is_not_named_as_a_lag():
     """A driver dead zone under a gravity load that never changes sign (plant 67 of the independent family, held
     out) is a constant error: the paper model, without an offset, biases k_tau, and `delay` fitted the bias (62 %).

@@ -121,6 +121,7 @@ def test_pairs_are_found_by_the_greedy_ladder(pair):
     assert o["final_verdict"] != "missing_effect", o["final_message"]
 
 
+@pytest.mark.slow  # its two cases are in SLOW_CASES (the default suite's budget)
 def test_out_of_grid_stribeck_on_the_simulator_is_partially_explained():
     """A Stribeck velocity outside the grid (0.6 rad/s, grid up to 0.32) is named at the largest v_s of the
     grid and reported as partially explained; the same excitation with v_s = 0.16 rad/s (in the grid) is not."""

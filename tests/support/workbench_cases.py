@@ -59,9 +59,11 @@ LOG_OF = {"clean@paper": "clean", "backlash@link": "backlash", "elastic@link": "
 LINK_RESOLUTION = 1e-5  # [rad] of the link-side angle sensor (as the motor encoder)
 
 # Cases only slow tests use (`make experiments`): the default suite keeps one case of each kind of test
-# (first-ranked effects of every family but these, one pair, the Stribeck grid edge) within its time budget.
+# (first-ranked effects of every family but these; one pair, cogging+coulomb_asym, whose single cases are slow) within
+# its time budget.
 SLOW_CASES = frozenset({"stribeck", "direction_gain", "load_friction", "thermal_drift", "elastic",
-                        "direction_gain+load_friction", "stribeck+cogging", "backlash@link", "elastic@link"})
+                        "direction_gain+load_friction", "stribeck+cogging", "backlash@link", "elastic@link",
+                        "cogging", "coulomb_asym", "stribeck@out_of_grid", "stribeck@in_grid"})
 PREFETCH_SLOW = False  # prefetch the slow cases too (tests/conftest.py sets it when slow tests are selected)
 
 CACHE_DIR = REPO_ROOT / ".pytest_cache" / "servotau-workbench"
