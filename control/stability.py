@@ -178,6 +178,7 @@ def spectral_radius(a: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(a))))
 
 
+@lru_cache(maxsize=4096)  # a pure function of frozen inputs: each controller built from a file asks again
 def radius(m: LoopModel, k6: float, k7: float, k_p: float, true_scale: tuple[float, float] = (1.0, 1.0)) -> float:
     """Spectral radius of the closed loop (< 1: stable)."""
     return float(np.max(np.abs(np.roots(characteristic_polynomial(m, k6, k7, k_p, true_scale)))))

@@ -134,6 +134,7 @@ def test_out_of_grid_stribeck_on_the_simulator_is_partially_explained():
     assert inside["shape"]["v_s"] < v_max and not inside["partial"], (inside["shape"], inside["remaining"])
 
 
+@pytest.mark.slow  # the two fast Stribeck cases are in SLOW_CASES
 def test_fast_motion_without_a_current_limit_is_not_saturation():
     """The excitation of the saturation case without a limit (the fast Stribeck logs, 20 A): the saturation
     term, which integrates the error where the torque proxy is largest, stays below min_gain."""
