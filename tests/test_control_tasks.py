@@ -30,6 +30,21 @@ def write(tmp_path, text: str, name: str = "task.toml"):
     return path
 
 
+class HoldWithGains:
+    """A user's task class (no file): one torque phase "soft" holding the start posture with ``gains``."""
+
+    name, settle, ft_offsets, source = "mine", 0.5, "calibrate", "mine.py"
+
+    def __init__(self, gains):
+        self.gains = gains
+
+    def phases(self, info, q):
+        from servotau.control.tasks import Phase
+        from servotau.control.tasks.references import Hold
+
+        return [Phase("soft", Hold(q), "torque", 0.1, gains=self.gains)]
+
+
 SINE = """
     name = "t"
     [[phases]]
@@ -75,8 +90,6 @@ def test_gains_per_phase_are_converted_per_joint_and_bad_ones_refused_naming_the
     """Each torque phase has its own gains (K6 = 0.5 then 0.25: k_s per joint from its motor model); gains in a
     position phase or a user task's unknown or negative gain are refused, naming the phase and the field, before
     anything moves (gains the identified model predicts unstable: the next test)."""
-    from servotau.control.tasks import Phase
-    from servotau.control.tasks.references import Hold
 
     text = SINE.format(amplitude=0.1, frequency=1).replace('name = "wave"', 'name = "wave"\nk6 = 0.5')
     with pytest.raises(ConfigError, match=r"field 'phases.wave.k6' = 0.5: expected no gains in a position phase"):
@@ -105,19 +118,10 @@ def test_gains_per_phase_are_converted_per_joint_and_bad_ones_refused_naming_the
             assert m.k_tau * (1 + g.k_p[i]) * g.k_s[i] == pytest.approx(k6)
     assert runner.gains[2] is None  # a position phase keeps the gains in use
 
-    class Mine:
-        name, settle, ft_offsets, source = "mine", 0.5, "calibrate", "mine.py"
-
-        def __init__(self, gains):
-            self.gains = gains
-
-        def phases(self, info, q):
-            return [Phase("soft", Hold(q), "torque", 0.1, gains=self.gains)]
-
     with pytest.raises(ConfigError, match=r'mine.py: phase "soft": gain \'k9\': expected one of'):
-        TaskRunner(Mine({"k9": 1.0}), robot[0]).prepare(robot[1])
+        TaskRunner(HoldWithGains({"k9": 1.0}), robot[0]).prepare(robot[1])
     with pytest.raises(ConfigError, match=r'mine.py: phase "soft": gain k_s = -1.0: expected a finite number >= 0'):
-        TaskRunner(Mine({"k_s": -1.0}), robot[0]).prepare(robot[1])
+        TaskRunner(HoldWithGains({"k_s": -1.0}), robot[0]).prepare(robot[1])
 
 
 def test_phase_gains_are_scheduled_and_a_loop_the_model_predicts_unstable_is_refused(robot):
@@ -125,20 +129,8 @@ def test_phase_gains_are_scheduled_and_a_loop_the_model_predicts_unstable_is_ref
     (gain_schedule = "margin"); K7 = 0 leaves the servo's damping cancelled by the k_v feedforward, which the
     identified model predicts unstable: refused naming the phase, the motor file and the joint, before anything
     moves."""
-    from servotau.control.tasks import Phase
-    from servotau.control.tasks.references import Hold
-
-    class Mine:
-        name, settle, ft_offsets, source = "mine", 0.5, "calibrate", "mine.py"
-
-        def __init__(self, gains):
-            self.gains = gains
-
-        def phases(self, info, q):
-            return [Phase("soft", Hold(q), "torque", 0.1, gains=self.gains)]
-
     info, q = robot
-    runner = TaskRunner(Mine({"k6": 1.0, "k7": 0.01}), info)
+    runner = TaskRunner(HoldWithGains({"k6": 1.0, "k7": 0.01}), info)
     runner.prepare(q)
     motors, (g,) = runner.manager().config.motors, runner.gains
     for j, m in motors.items():
@@ -147,7 +139,7 @@ def test_phase_gains_are_scheduled_and_a_loop_the_model_predicts_unstable_is_ref
         assert m.k_tau * (1 + g.k_p[i]) * g.k_d[i] == pytest.approx(0.01)  # K7 as given
     with pytest.raises(ConfigError, match=r'mine.py: phase "soft": .*hrp2_sim_deadband.toml: joint '
                                                 r'"RLEG_JOINT\d".*predicts an unstable torque loop'):
-        TaskRunner(Mine({"k6": 1.0, "k7": 0.0}), info).prepare(q)
+        TaskRunner(HoldWithGains({"k6": 1.0, "k7": 0.0}), info).prepare(q)
 
 
 def test_an_unknown_joint_is_refused_naming_it(tmp_path, robot):
