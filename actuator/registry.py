@@ -63,6 +63,10 @@ class Effect:
         family: The non-parametric probe it is compared with (one of :data:`FAMILIES`).
         description: One line of physics.
         needs: ``needs(excitation) -> str | None``: why the data cannot test the effect, or None.
+        needs_lookalikes: Effects that ``needs``'s reason is about, when its reason is only that the log cannot
+            tell this effect from them (e.g. a dead zone from Coulomb friction without a torque reversal at rest).
+            That reason holds on a log only where one of them removes a comparable error: where each removes at
+            most ``LOOKALIKE_SHARE`` of what this effect removes, the diagnosis tests the effect and says why.
         fit_columns: ``(signals, **shape) -> (n, k)`` columns fitted instead of ``regressor`` (e.g. sine
             and cosine of a ripple of unknown phase); then ``fold`` turns their ``k`` coefficients into
             one coefficient and the full shape, so that ``regressor`` reproduces the fitted sum.
@@ -100,6 +104,7 @@ class Effect:
     family: str = "custom"
     description: str = ""
     needs: Callable[[object], str | None] | None = None
+    needs_lookalikes: tuple[str, ...] = ()
     fit_columns: Callable[..., np.ndarray] | None = None
     fold: Callable[[np.ndarray, Mapping[str, float]], tuple[float, dict[str, float]]] | None = None
     online: Callable[[Mapping[str, float], float], OnlineTerm] | None = None
@@ -126,6 +131,7 @@ class Effect:
         object.__setattr__(self, "signals", tuple(self.signals))
         object.__setattr__(self, "confusable", tuple(self.confusable))
         object.__setattr__(self, "nests", tuple(self.nests))
+        object.__setattr__(self, "needs_lookalikes", tuple(self.needs_lookalikes))
         object.__setattr__(self, "signal_substitutes", dict(self.signal_substitutes))
         object.__setattr__(self, "experiments", dict(self.experiments))
         if self.phi_unit is not None and not isinstance(self.phi_unit, str):

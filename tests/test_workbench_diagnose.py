@@ -182,7 +182,8 @@ def test_thermal_drift_coefficient_is_at_most_zero():
 def _with_lead_share(share: float):
     """The synthetic log where, above the 90 % quantile of the motor-torque proxy (a shape of the saturation grid),
     the error keeps ``share`` of the command's lead since the onset: ``y = y_base + share (lead(t) - lead(t_on))``
-    with ``lead = q_des(t - 1) - q(t)``, computed tick by tick (the term reads the error it adds to)."""
+    with ``lead = q_des(t - 1) - q(t)``, computed tick by tick (the term reads the error it adds to), where that
+    lead grows in the direction of the torque (at a current limit the servo asks for more than it gets)."""
     from servotau.actuator.effects.saturation import motor_torque_proxy
     from servotau.actuator.signals import hysteresis, run_onsets
     from servotau.identification.workbench import get_effect
@@ -190,23 +191,24 @@ def _with_lead_share(share: float):
     base = synthetic_table(noise=0.0)
     s = load_dataset(base).signals
     grid = get_effect("saturation").grid_for(s)
-    beta = sorted({g["beta"] for g in grid})[1]  # 1 x P99|tau| / P99|dq|
+    beta = sorted({g["beta"] for g in grid})[2]  # 1 x P99|tau| / P99|dq|
     shape = sorted((g for g in grid if g["beta"] == beta), key=lambda g: g["tau_sat"])[2]  # its 90 % quantile
-    flag = hysteresis(np.abs(motor_torque_proxy(s, shape["beta"])), shape["tau_sat"],
-                      shape["release"] * shape["tau_sat"])
+    proxy = motor_torque_proxy(s, shape["beta"])
+    flag = hysteresis(np.abs(proxy), shape["tau_sat"], shape["release"] * shape["tau_sat"])
     onset = run_onsets(flag)
     q, y = base["q"], base["q_des"] - base["q"]
     out = y.copy()
     for i in np.flatnonzero(flag):
         j = max(onset[i], 1)
-        out[i] = y[i] + share * ((q[i - 1] + out[i - 1] - q[i]) - (q[j - 1] + out[j - 1] - q[j]))
+        grown = (q[i - 1] + out[i - 1] - q[i]) - (q[j - 1] + out[j - 1] - q[j])
+        out[i] = y[i] + share * grown * (grown * proxy[i] > 0)
     return load_dataset({**base, "q_des": q + out}), flag.mean()
 
 
 def test_saturation_coefficient_is_between_half_and_one_and_a_half():
     """Past a current limit the error keeps all of the command's lead (coefficient 1): a share in (0.5, 1.5) is
     named; where the servo still closes 80 % of it (share 0.2, the 0.13 fitted on a simulated log without a limit)
-    the detector found no limit, and the shape is not chosen although an unconstrained term fits it."""
+    the detector found no limit, and the term is not named although an unconstrained term fits it."""
     from dataclasses import replace
 
     from servotau.identification.workbench import get_effect, register_effect, unregister_effect
@@ -219,7 +221,9 @@ def test_saturation_coefficient_is_between_half_and_one_and_a_half():
         d = diagnose(low, parse_spec("coulomb", low.signals), effects=["saturation", "saturation_free"])
         free = d.candidate("saturation_free")  # measured: 100 %, coefficient 0.200; in range (0.8): 0.801
         assert free.heldout_gain > 0.5 and abs(free.coefficient - 0.2) < 0.05, (free.heldout_gain, free.coefficient)
-        assert d.candidate("saturation").heldout_gain == 0.0
+        # one shape's fit lands just inside the range (0.51: the term is one-sided, so half the lead fits half of
+        # it) and fails its held-out blocks (-162 %): never named
+        assert d.candidate("saturation").heldout_gain < 0.0 and d.top.effect != "saturation", d.message
         at, _ = _with_lead_share(0.8)
         d = diagnose(at, parse_spec("coulomb", at.signals), effects=["saturation"])
         assert d.top.effect == "saturation" and d.top.heldout_gain > 0.5, d.message
@@ -317,3 +321,40 @@ def test_a_tied_rival_is_the_next_effect_within_tie_that_does_not_nest_the_first
     assert tied_rival([first, _candidate("stribeck", 0.52), _candidate("cogging", 0.45)], first) is None
     assert tied_rival([first, _candidate("stribeck", 0.52), _candidate("load_friction", tie)], first).effect == (
         "load_friction")
+
+
+def _excitation(**changes):
+    """A log that moved both ways under a torque of one sign, never reversed at rest."""
+    from servotau.actuator import Excitation
+
+    fields = dict(duration=20.0, n_samples=10000, velocity_reversals=20, hold_time=4.0, slow_time=8.0, fast_time=4.0,
+                  quadrants={}, torque_range=(1.0, 5.0), torque_reversals_at_rest=0, torque_reversals=0,
+                  loaded_motion=0.5, velocity_range=(-1.0, 1.0), position_range=(0.0, 1.0), period=2e-3)
+    return Excitation(**{**fields, **changes})
+
+
+def test_a_look_alike_reason_holds_only_where_the_look_alike_removes_a_comparable_error():
+    """deadzone needs a torque reversal at rest only to tell it from Coulomb friction: where it would be named first
+    and coulomb removes at most LOOKALIKE_SHARE of what it removes, the log tells them apart and deadzone is tested,
+    saying why; where coulomb comes close, another effect removes more, or the units are doubted, the reason
+    stands."""
+    from dataclasses import replace
+
+    from servotau.actuator import get_effect
+    from servotau.identification.workbench.verdict import LOOKALIKE_SHARE, lookalikes_apart
+
+    exc = _excitation()
+    reason = get_effect("deadzone").needs(exc)
+    assert reason is not None and "Coulomb" in reason
+    dz = replace(_candidate("deadzone", 0.5), testable=False, reason=reason)
+    apart, notes = lookalikes_apart([dz, _candidate("coulomb", 0.05)], exc, 0.1)
+    assert apart[0].testable and apart[0].reason is None
+    assert len(notes) == 1 and "coulomb 5 %" in notes[0] and "deadzone 50 %" in notes[0]
+    close = _candidate("coulomb", 0.5 * LOOKALIKE_SHARE + 0.01)
+    assert not lookalikes_apart([dz, close], exc, 0.1)[0][0].testable
+    ahead = _candidate("cogging", 0.6)  # a testable effect removes more: deadzone would not be named first
+    assert not lookalikes_apart([dz, _candidate("coulomb", 0.05), ahead], exc, 0.1)[0][0].testable
+    doubted = _excitation(unit_doubts=("the torque reaches 5000 N m",))
+    assert not lookalikes_apart([dz, _candidate("coulomb", 0.0)], doubted, 0.1)[0][0].testable
+    other = replace(dz, reason="needs signal(s) ['tau']: not in the log")
+    assert not lookalikes_apart([other, _candidate("coulomb", 0.0)], exc, 0.1)[0][0].testable

@@ -256,6 +256,7 @@ EFFECT = Effect(
     family="servo_error",
     description="dead zone of the servo (on the position error or the current)",
     needs=needs,
+    needs_lookalikes=("coulomb",),
     fit_columns=columns,
     fold=fold,
     online=DeadzoneOnline,

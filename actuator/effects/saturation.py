@@ -25,7 +25,7 @@ from ..signals import Signals, command_lead, hysteresis, sample_lead, since_onse
 
 ORDER = 110
 LEVELS = (0.7, 0.8, 0.9, 0.95, 0.97, 0.99)  # quantiles of the proxy: the limit may hold up to 30 % of a log
-DAMPING = (0.5, 1.0, 1.5, 2.0)  # beta in units of the data's P99 |tau| / P99 |dq|
+DAMPING = (0.0, 0.5, 1.0, 1.5, 2.0)  # beta in units of the data's P99 |tau| / P99 |dq|
 RELEASE = 0.8  # leave the limit when the proxy falls below 80 % of it
 SATURATION_COEFFICIENT = (0.5, 1.5)
 """The part of the command's lead the error keeps past the limit: 1 in theory, with the same margin of 0.5 on
@@ -49,10 +49,15 @@ def saturation(s: Signals, tau_sat: float, beta: float, release: float = 0.8) ->
     command's lead that the servo cannot close integrates, ``phi = lead(t) - lead(t_onset)`` with
     ``lead = q_des(t - 1) - q(t)`` (:func:`~servotau.actuator.signals.command_lead`). This is the measured
     error since the onset: the term resets the model to the error it measured when the limit was reached
-    (output-error form).
+    (output-error form). The servo asks for more torque than the limit gives, so the error grows in the
+    direction of the torque: where ``phi`` has the other sign the servo is back in its linear range, and
+    ``phi = 0`` (a term of either sign would fit any error where the torque is large, e.g. friction while
+    holding a load).
     """
-    flag = hysteresis(np.abs(motor_torque_proxy(s, beta)), tau_sat, release * tau_sat, s.starts)
-    return since_onset(command_lead(s), flag, s.starts)
+    proxy = motor_torque_proxy(s, beta)
+    flag = hysteresis(np.abs(proxy), tau_sat, release * tau_sat, s.starts)
+    grown = since_onset(command_lead(s), flag, s.starts)
+    return np.where(grown * proxy > 0.0, grown, 0.0)
 
 
 def grid(s: Signals) -> tuple[dict[str, float], ...]:
@@ -86,7 +91,8 @@ class SaturationOnline:
     def value(self, x: Mapping[str, float]) -> float:
         if not (self.saturated and self._saturated(x)):
             return 0.0  # below the limit, or its onset (this tick's command is not read)
-        return sample_lead(x, self.q_des_prev) - self.onset_lead
+        grown = sample_lead(x, self.q_des_prev) - self.onset_lead
+        return grown if grown * (x["tau"] + self.beta * x["dq"]) > 0.0 else 0.0  # in the torque's direction
 
     def commit(self, x: Mapping[str, float]) -> None:
         sat = self._saturated(x)

@@ -72,8 +72,18 @@ from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
-from .resolution import quantisation_floor
-from .verdict import Candidate, Confusion, Diagnosis, at_grid_edge, nameable, recheck_probes, tied_rival, verdict_of
+from .resolution import probes_within_resolution, within_resolution
+from .verdict import (
+    Candidate,
+    Confusion,
+    Diagnosis,
+    at_grid_edge,
+    lookalikes_apart,
+    nameable,
+    recheck_probes,
+    tied_rival,
+    verdict_of,
+)
 
 __all__ = ["MIN_GAIN", "PARTIAL", "REMAINING", "Candidate", "Confusion", "Diagnosis", "diagnose"]
 
@@ -286,8 +296,9 @@ def diagnose(
             explained=explained,
             partial=bool(explained is not None and explained < PARTIAL and probe - gain > 0.05),
         ))
-    ranking = _ranked(_within_resolution(ds, ranking, e0, loss, min_gain), min_gain)
-    ranking = _checked(ds, spec, ranking, loss, folds, min_gain)
+    ranking, apart = lookalikes_apart(ranking, exc, min_gain)
+    ranking = _checked(ds, spec, _ranked(within_resolution(ds, ranking, e0, loss, min_gain), min_gain), loss, folds,
+                       min_gain)
     top = ranking[0] if ranking and ranking[0].testable else None
     if top is not None and top.heldout_gain >= min_gain and top.consistent and top.family in probes:
         try:
@@ -301,8 +312,8 @@ def diagnose(
         except IdentificationError:
             pass
     probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
-    probes, floored = _probes_within_resolution(ds, probes, e0, loss)
-    checks += floored
+    probes, floored = probes_within_resolution(ds, probes, e0, loss)
+    checks += floored + apart
     constant = [c.effect for c in ranking if c.reason and CONSTANT_ERROR in c.reason]
     if constant:
         checks += (f"{', '.join(constant)} lose their gain with a constant offset in the model, which it lacks: "
@@ -419,7 +430,7 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
         e1, gain, fold_gains, consistent = _heldout_gain(y, pred, e0, e0_folds, folds, loss)
         out.append(replace(c, heldout_gain=gain, heldout_error=e1, fold_gains=fold_gains, consistent=consistent,
                            explained=None, partial=False, remaining=None))
-    out = _ranked(_within_resolution(ds, out, e0, loss, min_gain), min_gain)
+    out = _ranked(within_resolution(ds, out, e0, loss, min_gain), min_gain)
     out = _checked(ds, with_top, out, loss, folds, min_gain)
     best = next((c for c in out if nameable(c, min_gain)), None)
     if best is None:
@@ -431,54 +442,6 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
     return replace(best, shape=dict(shape), coefficient=full.coefficients[eff.name],
                    train_gain=1.0 - e_train / train0 if train0 > 0 else 0.0,
                    at_grid_edge=at_grid_edge(eff, shape, ds.signals))
-
-
-def _floor(ds: Dataset, loss: Loss) -> float:
-    """The encoder's rounding error [rad RMS] where it is part of the target (``q_des - q``, least squares), else 0."""
-    if not ds.actuator or loss.kind != "least_squares":
-        return 0.0
-    return quantisation_floor(ds.preprocessing.get("q", {}).get("resolution", 0.0))
-
-
-def _within_resolution(ds: Dataset, ranking: list[Candidate], e0: float, loss: Loss, min_gain: float
-                       ) -> list[Candidate]:
-    """``ranking`` with the effects that would be named but remove no more error than the encoder's rounding
-    (:mod:`.resolution`) made untestable, saying so (least squares only: the errors are RMS)."""
-    floor = _floor(ds, loss)
-    if floor <= 0:
-        return ranking
-    out = []
-    for c in ranking:
-        removed = _removed(e0, c.heldout_error)
-        if c.testable and c.heldout_gain >= min_gain and removed <= floor:
-            c = replace(c, testable=False, reason=(
-                f"cannot tell: removes {1e6 * removed:.3g} urad RMS, within the encoder's rounding error "
-                f"({1e6 * floor:.3g} urad RMS, resolution {ds.preprocessing['q']['resolution']:.3g} rad)"))
-        out.append(c)
-    return out
-
-
-def _removed(e0: float, e1: float) -> float:
-    """The error [RMS] a term removes when it takes the held-out error from ``e0`` to ``e1``."""
-    return math.sqrt(max(e0 ** 2 - e1 ** 2, 0.0))
-
-
-def _probes_within_resolution(ds: Dataset, probes: dict[str, float], e0: float, loss: Loss
-                              ) -> tuple[dict[str, float], tuple[str, ...]]:
-    """``probes`` with the gains that remove no more error than the encoder's rounding set to 0, and a sentence
-    for each (see :func:`_within_resolution`)."""
-    floor = _floor(ds, loss)
-    if floor <= 0:
-        return probes, ()
-    out, notes = dict(probes), []
-    for k, g in probes.items():
-        removed = _removed(e0, e0 * (1.0 - g)) if g > 0 else 0.0
-        if 0 < removed <= floor:
-            out[k] = 0.0
-            if g >= 0.05:
-                notes.append(f"cannot tell: the {k} probe removes {1e6 * removed:.3g} urad RMS ({100 * g:.0f} %), "
-                             f"within the encoder's rounding error ({1e6 * floor:.3g} urad RMS)")
-    return out, tuple(notes)
 
 
 def _gain_with(ds: Dataset, spec: ModelSpec, eff: Effect, loss: Loss, folds: list[Fold]) -> float:

@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from servotau.actuator import EXPERIMENTS, Effect, Excitation, get_effect
+from servotau.actuator.excitation import units_plausible
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
@@ -43,6 +44,10 @@ untestable and the message says why."""
 TIE = 0.01
 """Two effects whose held-out errors differ by less than this fraction tie: the blocks do not order them
 (:func:`tied_rival`)."""
+
+LOOKALIKE_SHARE = 0.5
+"""An effect that ``needs`` calls untestable only for want of the excitation that tells it from its look-alikes is
+tested where each of them removes at most this share of the held-out error it removes (:func:`lookalikes_apart`)."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
@@ -225,6 +230,32 @@ def tied_rival(ranking, top: Candidate) -> Candidate | None:
     if rival is None or not rival.heldout_error <= (1.0 + TIE) * top.heldout_error:
         return None
     return rival
+
+
+def lookalikes_apart(ranking: list[Candidate], exc: Excitation, min_gain: float
+                     ) -> tuple[list[Candidate], tuple[str, ...]]:
+    """``ranking`` where an effect untestable only because the log lacks the excitation that tells it from its
+    look-alikes (``Effect.needs_lookalikes``) is testable when that reason does not hold on the log: it would be
+    named first (it removes ``min_gain`` of the held-out error, more than any testable effect), and each look-alike
+    removes at most ``LOOKALIKE_SHARE`` of what it removes. With a sentence for each such effect (the reason stays
+    true of the log, and the experiment still helps)."""
+    by_name = {c.effect: c for c in ranking}
+    best = max((c.heldout_gain for c in ranking if c.testable and math.isfinite(c.heldout_gain)), default=-math.inf)
+    out, notes = [], []
+    for c in ranking:
+        eff = get_effect(c.effect)
+        if (eff.needs_lookalikes and not c.testable and c.heldout_gain >= max(min_gain, best) and c.consistent
+                and units_plausible(exc) is None and eff.needs is not None and c.reason == eff.needs(exc)):
+            rivals = {n: by_name[n].heldout_gain for n in eff.needs_lookalikes if n in by_name}
+            rivals = {n: g if math.isfinite(g) else 0.0 for n, g in rivals.items()}
+            if all(g <= LOOKALIKE_SHARE * c.heldout_gain for g in rivals.values()):
+                removes = ", ".join(f"{n} {100 * g:.0f} %" for n, g in rivals.items()) or "none in the library"
+                notes.append(f"{c.effect} is tested although {c.reason.split(';')[0].split(':')[0]}: its look-alikes "
+                             f"remove little of the held-out error on this log ({removes}; {c.effect} "
+                             f"{100 * c.heldout_gain:.0f} %)")
+                c = replace(c, testable=True, reason=None)
+        out.append(c)
+    return out, tuple(notes)
 
 
 def at_grid_edge(effect: Effect, shape: Mapping[str, float], signals) -> bool:
