@@ -24,7 +24,9 @@ def test_a_lead_is_not_a_motor_lag():
 
 def test_a_current_loop_lag_of_an_independent_plant_is_named_with_its_time_constant():
     """servotau/experiments/plant_family.py (written without the workbench) with a 20 ms current loop: the
-    workbench names motor_lag, and its coefficient gives the time constant (-coefficient x the shape's)."""
+    workbench names motor_lag, and its coefficient gives the time constant (-coefficient x the shape's, or x the
+    period in the derivative form)."""
+    from servotau.actuator.effects.motor_lag import time_constant_of
     from servotau.experiments import plant_family as pf
 
     plant = pf.draw_plant(1004, hidden=("motor_lag",), period=2e-3, duration=12.0)
@@ -32,7 +34,7 @@ def test_a_current_loop_lag_of_an_independent_plant_is_named_with_its_time_const
     ds = load_dataset(dict(pf.measure(plant, true)))
     d = diagnose(ds, parse_spec("paper", ds.signals))
     assert d.verdict == "missing_effect" and d.top.effect == "motor_lag"
-    t_fit = -d.top.coefficient * d.top.shape["time_constant"]
+    t_fit = time_constant_of(d.top.coefficient, d.top.shape, ds.signals.dt)
     assert abs(t_fit / plant.effect["motor_lag"]["T"] - 1) < 0.25
 
 

@@ -5,7 +5,12 @@ is ``tau + T dtau/dt``, not the measured ``tau``, and the error ``e = k_tau (tau
 regressor is ``phi = lag(u_tau, time_constant) - u_tau`` (``u_tau = k_tau tau``), about
 ``-time_constant d(u_tau)/dt`` on slow motion, so its coefficient is about ``-T / time_constant``: negative for a
 lag (``LAG_COEFFICIENT``; a positive one would be a lead, not this effect). Only the torque part lags: the
-damping ``k_v dq`` acts on the measured velocity. On-line: ``tau`` and its history (a first-order lag).
+damping ``k_v dq`` acts on the measured velocity.
+
+The lag form is a derivative only below ``1 / (2 pi time_constant)``; a stiff servo's torque moves faster. The
+derivative form (``time_constant = 0``, the form's limit) is ``phi = u_tau(t - 1 tick) - u_tau(t)``, about
+``-period d(u_tau)/dt`` at every frequency the log resolves: its coefficient is ``-T / period``. On-line: ``tau``
+and its history (a first-order lag, or the last tick's ``u_tau``).
 """
 
 from __future__ import annotations
@@ -16,28 +21,40 @@ import numpy as np
 
 from ..excitation import Excitation, ResolvedGrid, fast_motion, lag_resolved
 from ..registry import Effect
-from ..signals import OnlineLag, Signals, lowpass
+from ..signals import OnlineLag, Signals, delayed, lowpass
 
 ORDER = 130
-SHAPES = tuple({"time_constant": v} for v in (0.005, 0.01, 0.02, 0.05))  # [s]
+SHAPES = tuple({"time_constant": v} for v in (0.0, 0.005, 0.01, 0.02, 0.05))  # [s] (0: the derivative form)
 GRID = ResolvedGrid(SHAPES, ("time_constant",))  # the time constants the sample period resolves
 LAG_COEFFICIENT = (float("-inf"), 0.0)  # -T / time_constant: a lag, never a lead
 
 
 def motor_lag(s: Signals, time_constant: float) -> np.ndarray:
     u = s["u_tau"]
+    if time_constant == 0.0:
+        s.require_dt("motor_lag")  # the derivative form reads the last tick: a uniform sampling
+        return delayed(u, 1, s.starts) - u
     return lowpass(u, time_constant, s.require_dt("motor_lag"), starts=s.starts) - u
+
+
+def time_constant_of(coefficient: float, shape: Mapping[str, float], period: float) -> float:
+    """The lag ``T`` [s] a fitted ``coefficient`` of ``shape`` gives on a log sampled every ``period`` [s]:
+    ``-coefficient`` times the shape's time constant, or times the period in the derivative form."""
+    return -coefficient * (shape["time_constant"] or period)
 
 
 class MotorLagOnline(OnlineLag):
     def __init__(self, shape: Mapping[str, float], period: float):
         super().__init__(shape["time_constant"], period, None)
+        self.derivative = shape["time_constant"] == 0.0
 
     def value(self, x: Mapping[str, float]) -> float:
+        if self.derivative:
+            return 0.0 if self.y is None else self.y - x["u_tau"]
         return self._next(x["u_tau"]) - x["u_tau"]
 
     def commit(self, x: Mapping[str, float]) -> None:
-        self.y = self._next(x["u_tau"])
+        self.y = x["u_tau"] if self.derivative else self._next(x["u_tau"])
 
 
 def needs(e: Excitation) -> str | None:
