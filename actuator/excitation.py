@@ -312,15 +312,23 @@ def resolvable(shape: Mapping[str, float], keys: Iterable[str], period: float | 
 @dataclass(frozen=True)
 class ResolvedGrid:
     """An effect's grid restricted to the shapes the log's sample period resolves (:func:`resolvable`): called
-    with the signals, the shapes whose time parameters ``keys`` [s] are at least :func:`shortest`; when none is,
-    the whole grid (the effect's ``needs`` then says it cannot be told, see :func:`lag_resolved`)."""
+    with the signals, the shapes whose time parameters ``keys`` [s] are at least :func:`shortest`; when no shape
+    with a positive time parameter is, the whole grid (the effect's ``needs`` then says it cannot be told, see
+    :func:`lag_resolved`). A shape whose time parameters are all 0 (``motor_lag``'s derivative form) comes with
+    the resolved ones: it stands for lags shorter than they are, which the log resolves no better."""
 
     shapes: tuple[Mapping[str, float], ...]
     keys: tuple[str, ...]
 
+    def resolves(self, period: float | None) -> bool:
+        """A shape with a positive time parameter is resolved at ``period`` [s]."""
+        return any(resolvable(g, self.keys, period) and any(g.get(k, 0.0) > 0.0 for k in self.keys)
+                   for g in self.shapes)
+
     def __call__(self, signals: Signals) -> tuple[Mapping[str, float], ...]:
-        kept = tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
-        return kept or self.shapes
+        if not self.resolves(signals.dt):
+            return self.shapes
+        return tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
 
 
 def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
@@ -329,7 +337,7 @@ def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
     if e.period_jitter > JITTER_TOL:
         return (f"cannot tell: the time steps jitter by {100 * e.period_jitter:.0f} % of the period (more than "
                 f"{100 * JITTER_TOL:.0f} %): the timing cannot resolve a {what}")
-    if any(resolvable(g, grid.keys, e.period) for g in grid.shapes):
+    if grid.resolves(e.period):
         return None
     ranges = []
     for k in grid.keys:
