@@ -1,6 +1,8 @@
 """Tests of the workbench model, the motor-parameter file with extra terms and the on-line evaluation
 (identification/workbench/model.py; actuator/online.py, registry.py; MotorModel.predict/online)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from support.synthetic import synthetic_table
@@ -76,6 +78,23 @@ def test_online_evaluation_matches_the_batch_one(effect):
     c, ddq = signals(1.0)
     m = model_with(effect)
     batch = m.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq, period=1e-3)
+    online = m.online(1e-3)
+    ticks = [online.step(c["tau"][k], c["dq"][k], q=c["q"][k], q_des=c["q_des"][k], t=c["t"][k], ddq=ddq[k])
+             for k in range(len(c["t"]))]
+    np.testing.assert_allclose(ticks, batch, rtol=1e-9, atol=1e-15)
+
+
+@pytest.mark.parametrize("effect", ["motor_lag", "saturation"])
+def test_online_matches_the_batch_one_in_the_other_forms(effect):
+    """motor_lag's derivative form (time_constant 0: the last tick of u_tau) and saturation with beta 0 (the logged
+    torque is the motor's; the term grows only in the torque's direction) are evaluated on-line as in batch, and
+    the term is not zero on the log."""
+    c, ddq = signals(1.0)
+    shape = {"time_constant": 0.0} if effect == "motor_lag" else {
+        "tau_sat": float(np.quantile(np.abs(c["tau"]), 0.8)), "beta": 0.0, "release": 0.8}
+    m = replace(model_with(), extra={effect: EffectTerm(model_with(effect).extra[effect].coefficient, shape)})
+    batch = m.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq, period=1e-3)
+    assert np.ptp(batch - model_with().predict(c["tau"], c["dq"])) > 0
     online = m.online(1e-3)
     ticks = [online.step(c["tau"][k], c["dq"][k], q=c["q"][k], q_des=c["q_des"][k], t=c["t"][k], ddq=ddq[k])
              for k in range(len(c["t"]))]
