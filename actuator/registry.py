@@ -63,10 +63,12 @@ class Effect:
         family: The non-parametric probe it is compared with (one of :data:`FAMILIES`).
         description: One line of physics.
         needs: ``needs(excitation) -> str | None``: why the data cannot test the effect, or None.
-        needs_lookalikes: Effects that ``needs``'s reason is about, when its reason is only that the log cannot
-            tell this effect from them (e.g. a dead zone from Coulomb friction without a torque reversal at rest).
-            That reason holds on a log only where one of them removes a comparable error: where each removes at
-            most ``LOOKALIKE_SHARE`` of what this effect removes, the diagnosis tests the effect and says why.
+        lookalike_needs: ``lookalike_needs(excitation) -> str | None``: the part of ``needs`` whose reason is only
+            that the log cannot tell this effect from ``needs_lookalikes`` (e.g. a dead zone from Coulomb friction
+            without a torque reversal at rest). That reason holds on a log only where one of them removes a
+            comparable error: where each was scored (or is in the model) and removes at most the diagnosis's
+            ``LOOKALIKE_SHARE`` of what this effect removes, the effect is tested and the diagnosis says why.
+        needs_lookalikes: The effects ``lookalike_needs`` is about.
         fit_columns: ``(signals, **shape) -> (n, k)`` columns fitted instead of ``regressor`` (e.g. sine
             and cosine of a ripple of unknown phase); then ``fold`` turns their ``k`` coefficients into
             one coefficient and the full shape, so that ``regressor`` reproduces the fitted sum.
@@ -104,6 +106,7 @@ class Effect:
     family: str = "custom"
     description: str = ""
     needs: Callable[[object], str | None] | None = None
+    lookalike_needs: Callable[[object], str | None] | None = None
     needs_lookalikes: tuple[str, ...] = ()
     fit_columns: Callable[..., np.ndarray] | None = None
     fold: Callable[[np.ndarray, Mapping[str, float]], tuple[float, dict[str, float]]] | None = None
@@ -138,6 +141,9 @@ class Effect:
             object.__setattr__(self, "phi_unit", dict(self.phi_unit))
         if self.family not in FAMILIES:
             raise IdentificationError(f"effect '{self.name}': family {self.family!r}: expected one of {FAMILIES}")
+        if (self.lookalike_needs is None) != (not self.needs_lookalikes):
+            raise IdentificationError(f"effect '{self.name}': expected both lookalike_needs and needs_lookalikes, "
+                                      "or neither")
         if (self.fit_columns is None) != (self.fold is None):
             raise IdentificationError(f"effect '{self.name}': expected both fit_columns and fold, or neither")
         if self.coefficient_range is not None:

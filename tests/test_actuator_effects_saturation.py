@@ -26,3 +26,27 @@ def test_saturation_holds_the_limit_with_hysteresis_and_integrates_the_command_l
     np.testing.assert_allclose(phi, [0, 0, 0, 1e-3, 0, 0, 0, 0, 0, 1e-3], atol=1e-15)
     with pytest.raises(IdentificationError, match="off"):
         hysteresis(x, 8.0, 10.0)
+
+
+def test_saturation_grows_only_in_the_direction_of_the_torque():
+    """Past the limit the servo asks for more torque than it gets: the error grows in the torque's direction. Where
+    the lead since the onset has the other sign the servo is back in its linear range, and the term is 0 (off-line
+    and on-line alike)."""
+    from servotau.actuator.effects.saturation import SaturationOnline, saturation
+    from servotau.actuator.signals import Signals
+
+    tau = np.array([0.0, 12.0, 12.0, 12.0, 12.0, 0.0, -12.0, -12.0, -12.0, -12.0])
+    q = np.zeros(len(tau))
+    q_des = 1e-3 * np.array([0.0, 0.0, 1.0, 2.0, 1.0, 0.0, 0.0, 1.0, -1.0, -2.0])  # [rad]
+    sig = Signals({"tau": tau, "dq": np.zeros(len(tau)), "q": q, "q_des": q_des}, 1e-3, len(tau))
+    phi = saturation(sig, tau_sat=10.0, beta=0.0)
+    # lead = q_des[k-1] - q[k]; onsets 1 and 6: the positive run grows (+1, +2 mrad), the negative run's lead
+    # first grows against its torque (+1 mrad at 8: zeroed), then with it (-1 mrad at 9)
+    np.testing.assert_allclose(phi, 1e-3 * np.array([0, 0, 0, 1, 2, 0, 0, 0, 0, -1]), atol=1e-15)
+    online = SaturationOnline({"tau_sat": 10.0, "beta": 0.0}, 1e-3)
+    ticks = []
+    for k in range(len(tau)):
+        x = {"tau": tau[k], "dq": 0.0, "q": q[k], "q_des": q_des[k]}
+        ticks.append(online.value(x))
+        online.commit(x)
+    np.testing.assert_allclose(ticks, phi, atol=1e-15)

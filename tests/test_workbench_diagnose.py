@@ -281,6 +281,26 @@ def test_a_constant_error_is_not_named_as_a_lag():
     assert with_offset.verdict == "no_missing_effect", with_offset.message
 
 
+@pytest.mark.slow  # 8 s per plant
+@pytest.mark.parametrize(("seed", "effect", "form"), [
+    (2152, "deadzone", None),  # a driver dead zone whose torque never reverses at rest (coulomb removes 0 %)
+    (2168, "motor_lag", {"time_constant": 0.0}),  # a 6.3 ms current loop at 4 ms: the derivative form
+    (2091, "saturation", {"beta": 0.0}),  # a current limit reached on 28 % of the samples at 11 ms
+])
+def test_plants_of_the_development_set_name_their_effect(seed, effect, form):
+    """Plants of the independent family's development seeds (2000-2199), on which the look-alike rule, the
+    derivative form of motor_lag and saturation's beta = 0 were found: the hidden effect is named first."""
+    from servotau.experiments import plant_family as pf
+
+    plant = pf.draw_plant(seed)
+    assert effect in plant.hidden
+    (true,) = pf.simulate([plant])
+    ds = load_dataset(dict(pf.measure(plant, true)))
+    d = diagnose(ds, parse_spec("paper", ds.signals))
+    assert d.verdict == "missing_effect" and d.top.effect == effect, d.message
+    assert form is None or all(d.top.shape[k] == v for k, v in form.items()), d.top.shape
+
+
 def test_a_torque_constant_falling_with_heat_is_named_in_the_gain_form():
     """The servo needs more error for the same torque as the winding heats (the torque part scaled by 1 + a h):
     thermal_drift is named in its gain form (-h u_tau), with the coefficient -a."""
@@ -355,6 +375,14 @@ def test_a_look_alike_reason_holds_only_where_the_look_alike_removes_a_comparabl
     ahead = _candidate("cogging", 0.6)  # a testable effect removes more: deadzone would not be named first
     assert not lookalikes_apart([dz, _candidate("coulomb", 0.05), ahead], exc, 0.1)[0][0].testable
     doubted = _excitation(unit_doubts=("the torque reaches 5000 N m",))
-    assert not lookalikes_apart([dz, _candidate("coulomb", 0.0)], doubted, 0.1)[0][0].testable
+    from servotau.actuator.excitation import units_plausible
+
+    doubted_dz = replace(dz, reason=units_plausible(doubted))  # what diagnose gives: the units' reason comes first
+    assert not lookalikes_apart([doubted_dz, _candidate("coulomb", 0.0)], doubted, 0.1)[0][0].testable
     other = replace(dz, reason="needs signal(s) ['tau']: not in the log")
     assert not lookalikes_apart([other, _candidate("coulomb", 0.0)], exc, 0.1)[0][0].testable
+    assert not lookalikes_apart([dz], exc, 0.1)[0][0].testable  # coulomb never scored: the reason stands
+    in_model, notes = lookalikes_apart([dz], exc, 0.1, ("coulomb",))  # scored over a model with coulomb
+    assert in_model[0].testable and "coulomb in the model" in notes[0]
+    for weak in (replace(dz, consistent=False), replace(dz, heldout_gain=0.05)):  # not nameable anyway
+        assert not lookalikes_apart([weak, _candidate("coulomb", 0.0)], exc, 0.1)[0][0].testable

@@ -239,9 +239,13 @@ def with_dead_band(model: MotorModel, d: float, band: float = BAND, provenance: 
 
 
 def needs(e: Excitation) -> str | None:
-    """A torque reversal at rest: without it a dead zone looks like Coulomb friction."""
-    if e.torque_range is None:
-        return has_torque(e)
+    """A torque, and a torque reversal at rest (:func:`rest_reversal`)."""
+    return has_torque(e) if e.torque_range is None else rest_reversal(e)
+
+
+def rest_reversal(e: Excitation) -> str | None:
+    """A torque reversal at rest: without it a dead zone can look like Coulomb friction (only a look-alike's
+    reason: the diagnosis tests the dead zone where Coulomb friction removes little, ``needs_lookalikes``)."""
     if e.torque_reversals_at_rest < 1:
         return ("the torque never changed sign while holding still: a dead zone looks like Coulomb friction; "
                 "push the joint through zero torque at rest")
@@ -256,6 +260,7 @@ EFFECT = Effect(
     family="servo_error",
     description="dead zone of the servo (on the position error or the current)",
     needs=needs,
+    lookalike_needs=rest_reversal,
     needs_lookalikes=("coulomb",),
     fit_columns=columns,
     fold=fold,

@@ -1,9 +1,10 @@
 """``saturation``: current limit: past it the servo torque no longer follows the position error.
 
-``phi = [sat] (lead(t) - lead(t_onset))``: saturated while the motor-torque proxy ``|tau + beta dq|`` exceeds
-``tau_sat`` [N m] (until it falls below ``release tau_sat``); ``lead = q_des(t - 1 tick) - q(t)``, its change
-since the onset of the limit is the integral of the command's lead the servo cannot close (the measured error
-since the onset: the term resets the model to the error measured when the limit was reached). ``beta``
+``phi = [sat] (lead(t) - lead(t_onset))`` where it has the sign of the proxy ``tau + beta dq`` (else 0):
+saturated while the motor-torque proxy ``|tau + beta dq|`` exceeds ``tau_sat`` [N m] (until it falls below
+``release tau_sat``); ``lead = q_des(t - 1 tick) - q(t)``, its change since the onset of the limit is the integral
+of the command's lead the servo cannot close (the measured error since the onset: the term resets the model to the
+error measured when the limit was reached), and it grows in the direction of the torque. ``beta``
 [N m s/rad] is the damping outside the servo; the proxy reads the signals, not ``u`` (a fit on saturated data
 bends the model). Simulated knee, 2.5 A limit, fast excitation: held-out gain 0.97, fall 0.98, coefficient 1.0
 (docs/workbench.md); coefficients outside ``SATURATION_COEFFICIENT`` are not chosen.

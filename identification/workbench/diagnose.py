@@ -296,7 +296,7 @@ def diagnose(
             explained=explained,
             partial=bool(explained is not None and explained < PARTIAL and probe - gain > 0.05),
         ))
-    ranking, apart = lookalikes_apart(ranking, exc, min_gain)
+    ranking, apart = lookalikes_apart(ranking, exc, min_gain, tuple(spec.effect_names))
     ranking = _checked(ds, spec, _ranked(within_resolution(ds, ranking, e0, loss, min_gain), min_gain), loss, folds,
                        min_gain)
     top = ranking[0] if ranking and ranking[0].testable else None

@@ -17,7 +17,6 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from servotau.actuator import EXPERIMENTS, Effect, Excitation, get_effect
-from servotau.actuator.excitation import units_plausible
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
@@ -232,24 +231,28 @@ def tied_rival(ranking, top: Candidate) -> Candidate | None:
     return rival
 
 
-def lookalikes_apart(ranking: list[Candidate], exc: Excitation, min_gain: float
+def lookalikes_apart(ranking: list[Candidate], exc: Excitation, min_gain: float, in_model: tuple[str, ...] = ()
                      ) -> tuple[list[Candidate], tuple[str, ...]]:
     """``ranking`` where an effect untestable only because the log lacks the excitation that tells it from its
-    look-alikes (``Effect.needs_lookalikes``) is testable when that reason does not hold on the log: it would be
-    named first (it removes ``min_gain`` of the held-out error, more than any testable effect), and each look-alike
-    removes at most ``LOOKALIKE_SHARE`` of what it removes. With a sentence for each such effect (the reason stays
-    true of the log, and the experiment still helps)."""
+    look-alikes (its reason is ``Effect.lookalike_needs``'s) is testable when that reason does not hold on the log:
+    it would be named first (it removes ``min_gain`` of the held-out error, more than any testable effect), and each
+    look-alike was scored and removes at most ``LOOKALIKE_SHARE`` of what it removes, or is in the model
+    (``in_model``). With a sentence for each such effect (the reason stays true of the log, and the experiment
+    still helps). It reads the ranking before the derivative, offset and resolution checks: an effect those later
+    make untestable still counts as removing what it removed (the cautious side)."""
     by_name = {c.effect: c for c in ranking}
     best = max((c.heldout_gain for c in ranking if c.testable and math.isfinite(c.heldout_gain)), default=-math.inf)
     out, notes = [], []
     for c in ranking:
         eff = get_effect(c.effect)
-        if (eff.needs_lookalikes and not c.testable and c.heldout_gain >= max(min_gain, best) and c.consistent
-                and units_plausible(exc) is None and eff.needs is not None and c.reason == eff.needs(exc)):
+        if (eff.lookalike_needs is not None and not c.testable and c.heldout_gain >= max(min_gain, best)
+                and c.consistent and c.reason == eff.lookalike_needs(exc)
+                and all(n in by_name or n in in_model for n in eff.needs_lookalikes)):
             rivals = {n: by_name[n].heldout_gain for n in eff.needs_lookalikes if n in by_name}
             rivals = {n: g if math.isfinite(g) else 0.0 for n, g in rivals.items()}
             if all(g <= LOOKALIKE_SHARE * c.heldout_gain for g in rivals.values()):
-                removes = ", ".join(f"{n} {100 * g:.0f} %" for n, g in rivals.items()) or "none in the library"
+                removes = "; ".join([f"{n} {100 * g:.0f} %" for n, g in rivals.items()]
+                                    + [f"{n} in the model" for n in eff.needs_lookalikes if n in in_model])
                 notes.append(f"{c.effect} is tested although {c.reason.split(';')[0].split(':')[0]}: its look-alikes "
                              f"remove little of the held-out error on this log ({removes}; {c.effect} "
                              f"{100 * c.heldout_gain:.0f} %)")
