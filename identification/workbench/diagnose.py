@@ -38,7 +38,9 @@ and lag-like terms fit the bias ("cannot tell: may be a constant error"; the mes
 offset).
 
 Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
-ranked but never named: they are reported as untestable, not as absent. Nor is an effect named (or a probe
+ranked but never named: they are reported as untestable, not as absent. A reason that is only a look-alike's
+(``Effect.lookalike_needs``) does not hold where the effect would be named first and its look-alikes remove
+little (:func:`~.verdict.lookalikes_apart`). Nor is an effect named (or a probe
 counted) that removes no more error than the encoder's rounding (:mod:`.resolution`).
 
 With ``missing_effect``, every other testable effect is scored again over the model with the named one (same
