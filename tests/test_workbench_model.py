@@ -76,12 +76,18 @@ def test_motor_model_predict_evaluates_extra_terms_through_the_registry():
 def test_online_evaluation_matches_the_batch_one(effect):
     """Tick by tick (effects with memory keep their state), the on-line model equals MotorModel.predict."""
     c, ddq = signals(1.0)
-    m = model_with(effect)
+    _assert_online_equals_batch(model_with(effect), c, ddq)
+
+
+def _assert_online_equals_batch(m: MotorModel, c, ddq) -> np.ndarray:
+    """``m`` on the log ``c`` tick by tick (effects with memory keep their state) equals ``m.predict``; that
+    prediction."""
     batch = m.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq, period=1e-3)
     online = m.online(1e-3)
     ticks = [online.step(c["tau"][k], c["dq"][k], q=c["q"][k], q_des=c["q_des"][k], t=c["t"][k], ddq=ddq[k])
              for k in range(len(c["t"]))]
     np.testing.assert_allclose(ticks, batch, rtol=1e-9, atol=1e-15)
+    return batch
 
 
 @pytest.mark.parametrize("effect", ["motor_lag", "saturation"])
@@ -93,12 +99,8 @@ def test_online_matches_the_batch_one_in_the_other_forms(effect):
     shape = {"time_constant": 0.0} if effect == "motor_lag" else {
         "tau_sat": float(np.quantile(np.abs(c["tau"]), 0.8)), "beta": 0.0, "release": 0.8}
     m = replace(model_with(), extra={effect: EffectTerm(model_with(effect).extra[effect].coefficient, shape)})
-    batch = m.predict(c["tau"], c["dq"], q=c["q"], q_des=c["q_des"], t=c["t"], ddq=ddq, period=1e-3)
+    batch = _assert_online_equals_batch(m, c, ddq)
     assert np.ptp(batch - model_with().predict(c["tau"], c["dq"])) > 0
-    online = m.online(1e-3)
-    ticks = [online.step(c["tau"][k], c["dq"][k], q=c["q"][k], q_des=c["q_des"][k], t=c["t"][k], ddq=ddq[k])
-             for k in range(len(c["t"]))]
-    np.testing.assert_allclose(ticks, batch, rtol=1e-9, atol=1e-15)
 
 
 def test_online_command_solves_for_the_delayed_command():

@@ -35,7 +35,7 @@ not at a limit (fitted 0.13 on a simulated log with Stribeck friction and therma
 the range the term is a generic memory correction (fitted -1.5 and -2.0 on simulated logs without a limit)."""
 
 
-def motor_torque_proxy(s: Signals, beta: float) -> np.ndarray:
+def motor_torque_proxy(s: Signals | Mapping[str, float], beta: float) -> np.ndarray | float:
     """``tau + beta dq`` [N m]: the torque estimate plus the damping outside the servo (``beta`` [N m s/rad]),
     what the motor must produce; it sits at the current limit while the servo saturates. Read from the
     signals only, not from the model: a model fitted on saturated data is bent by them."""
@@ -87,13 +87,13 @@ class SaturationOnline:
 
     def _saturated(self, x: Mapping[str, float]) -> bool:
         level = self.release * self.tau_sat if self.saturated else self.tau_sat
-        return abs(x["tau"] + self.beta * x["dq"]) > level
+        return abs(motor_torque_proxy(x, self.beta)) > level
 
     def value(self, x: Mapping[str, float]) -> float:
         if not (self.saturated and self._saturated(x)):
             return 0.0  # below the limit, or its onset (this tick's command is not read)
         grown = sample_lead(x, self.q_des_prev) - self.onset_lead
-        return grown if grown * (x["tau"] + self.beta * x["dq"]) > 0.0 else 0.0  # in the torque's direction
+        return grown if grown * motor_torque_proxy(x, self.beta) > 0.0 else 0.0  # in the torque's direction
 
     def commit(self, x: Mapping[str, float]) -> None:
         sat = self._saturated(x)
