@@ -9,6 +9,7 @@ from __future__ import annotations
 import pytest
 from support.hal import endpoint, free_port, robot_server
 
+CASE_READERS = {"test_workbench_effects"}  # modules reading tests/support/workbench_cases' outcomes
 FRAME_TIMEOUT = 5.0  # [s] controller-side read timeout of the fixtures' backends: a safety net, not a test
 
 
@@ -41,7 +42,11 @@ def _workbench_pool():
 
 @pytest.hookimpl(trylast=True)  # after `-m` has deselected
 def pytest_collection_modifyitems(config, items):
-    """Prefetch the workbench's slow cases only when a slow test is selected (tests/support/workbench_cases)."""
+    """Start simulating the workbench's cases as the session starts, when a test reading them is selected: the
+    suite's other tests keep one core busy, the cases' worker processes use the other one meanwhile. The slow
+    cases are prefetched only when a slow test is selected (tests/support/workbench_cases)."""
     from support import workbench_cases
 
     workbench_cases.PREFETCH_SLOW = any(item.get_closest_marker("slow") for item in items)
+    if not config.option.collectonly and any(getattr(item.module, "__name__", "") in CASE_READERS for item in items):
+        workbench_cases.prefetch()

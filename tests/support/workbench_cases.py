@@ -1,8 +1,9 @@
 """Hidden-effect logs of the simulated HRP-2 knee and the workbench's outcome on each (session cache).
 
-The workbench tests import :func:`outcome`, :func:`sim_log` and :data:`REFERENCE` from here. The first
-call starts simulating every log the default tests need and running the workbench on each, two cases at
-a time in background worker processes (one BLAS thread each); each call waits for its own case only.
+The workbench tests import :func:`outcome`, :func:`sim_log` and :data:`REFERENCE` from here. The session
+starts simulating every log the selected tests need and running the workbench on each (tests/conftest.py calls
+:func:`prefetch` after collection), two cases at a time in background worker processes (one BLAS thread each);
+each call waits for its own case only.
 Logs are also kept in ``.pytest_cache/servotau-workbench/`` under a key hashing the simulator's sources,
 the servo configuration and the log generator, so a change in any of them simulates again; the
 workbench itself always runs.
