@@ -72,6 +72,8 @@ class Excitation:
         period_jitter: Robust spread of the time steps [periods] (:func:`period_jitter`).
         position_gap: Largest stretch [rad] of the positions sampled where a function of the position is known
             only from one or two samples (:func:`position_gap`; None without position).
+        command_curvature: How much the command ``q_des`` turns between two samples (:func:`curvature`; None
+            without a command): small where it moves smoothly at the sample rate.
         unit_doubts: Values implausible in the role's unit (:func:`unit_doubts`).
         faults: What makes the log unfit to test any effect (a position that never changes).
         velocity_noise: Noise floor of ``dq`` [rad/s] (:func:`noise_floor`).
@@ -104,6 +106,7 @@ class Excitation:
     tau_threshold: float | None = None
     period_jitter: float = 0.0
     position_gap: float | None = None
+    command_curvature: float | None = None
     unit_doubts: tuple[str, ...] = ()
     faults: tuple[str, ...] = ()
 
@@ -140,6 +143,9 @@ class Excitation:
         if self.position_range is not None:
             out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad, largest "
                        f"stretch sampled fewer than 3 times {self.position_gap:.3g} rad")
+        if self.command_curvature is not None:
+            out.append(f"command curvature {self.command_curvature:.2g} (its second difference over its first: "
+                       "2 sin(pi / N) for a sine sampled N times a period, 1.4 for steps)")
         if self.period_jitter > 0.0:
             out.append(f"time steps jitter by {100 * self.period_jitter:.0f} % of the period (robust spread)")
         out += [f"units doubted: {d}" for d in self.unit_doubts] + [f"fault: {f}" for f in self.faults]
@@ -199,6 +205,16 @@ def position_gap(q: np.ndarray, bins: int = 100, visits: int = 3) -> float:
         run = run + 1 if c < visits else 0
         longest = max(longest, run)
     return float((longest + 1) * (hi - lo) / bins) if longest else 0.0
+
+
+def curvature(x: np.ndarray) -> float:
+    """RMS of the second difference of ``x`` over the RMS of its first: ``2 sin(pi / N)`` for a sine sampled ``N``
+    times a period, about ``sqrt(2)`` for steps; 0 for fewer than 3 samples or a constant."""
+    x = np.asarray(x, dtype=np.float64)
+    if x.size < 3:
+        return 0.0
+    d1 = float(np.sqrt(np.mean(np.diff(x) ** 2)))
+    return float(np.sqrt(np.mean(np.diff(x, 2) ** 2)) / d1) if d1 > 0.0 else 0.0
 
 
 def _reversals(x: np.ndarray, threshold: float) -> int:
@@ -279,6 +295,7 @@ def excitation_report(signals: Signals) -> Excitation:
         tau_threshold=tau_threshold,
         period_jitter=jitter,
         position_gap=gap,
+        command_curvature=curvature(signals["q_des"]) if "q_des" in signals else None,
         unit_doubts=tuple(doubts),
         faults=(f"the position never changes (= {q[0]:.6g} rad): the joint never moved",)
         if q is not None and q.size and np.ptp(q) == 0.0 else (),
@@ -331,14 +348,21 @@ class ResolvedGrid:
         return tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
 
 
-def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
-    """Why the log's timing resolves no shape of ``grid`` (``what``: e.g. "delay"), or None: time steps that
-    jitter by more than ``JITTER_TOL``, or a sample period longer than every shape allows."""
+def steady_timing(e: Excitation, what: str) -> str | None:
+    """Why the log's time steps cannot resolve a ``what`` (e.g. "delay"): they jitter by more than ``JITTER_TOL``;
+    or None."""
     if e.period_jitter > JITTER_TOL:
         return (f"cannot tell: the time steps jitter by {100 * e.period_jitter:.0f} % of the period (more than "
                 f"{100 * JITTER_TOL:.0f} %): the timing cannot resolve a {what}")
-    if grid.resolves(e.period):
-        return None
+    return None
+
+
+def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
+    """Why the log's timing resolves no shape of ``grid`` (``what``: e.g. "delay"), or None: time steps that
+    jitter by more than ``JITTER_TOL``, or a sample period longer than every shape allows."""
+    jitter = steady_timing(e, what)
+    if jitter or grid.resolves(e.period):
+        return jitter
     ranges = []
     for k in grid.keys:
         values = sorted({g[k] for g in grid.shapes if g.get(k, 0.0) > 0.0})

@@ -36,6 +36,21 @@ def test_clean_synthetic_data_give_no_missing_effect():
     assert d.probes["memory"] < MIN_GAIN, d.probes  # white encoder noise has no memory
 
 
+def test_a_constant_error_is_reported_whatever_the_verdict():
+    """A servo error 0.4 mrad off zero (an encoder's zero) that the model without an offset cannot fit: the message
+    says how much an offset removes and to rerun with --offset on; with the offset in the model it says nothing."""
+    ds = load_dataset(synthetic_table(lambda t, q, dq, tau: np.full_like(t, 4e-4)))
+    d = diagnose(ds, parse_spec("coulomb", ds.signals))
+    notes = [c for c in d.checks if c.startswith("a constant error")]
+    assert len(notes) == 1 and "--offset on" in notes[0] and notes[0] in d.message, d.message
+    gain = int(notes[0].split("removes ")[1].split(" %")[0])
+    assert gain >= 100 * MIN_GAIN
+    clean = diagnose(load_dataset(synthetic_table()), parse_spec("coulomb", ds.signals))
+    assert not any(c.startswith("a constant error") for c in clean.checks), clean.message
+    with_offset = diagnose(ds, parse_spec("coulomb", ds.signals, offset=True))
+    assert not any(c.startswith("a constant error") for c in with_offset.checks), with_offset.message
+
+
 def test_stribeck_velocity_outside_the_grid_is_partially_explained():
     """A Stribeck velocity above the grid (1 rad/s, grid max 0.32) is named but partially explained; the same
     Stribeck friction inside the grid (0.16 rad/s) is fully explained. Over this log's speeds the out-of-grid
@@ -286,10 +301,12 @@ def test_a_constant_error_is_not_named_as_a_lag():
     (2152, "deadzone", None),  # a driver dead zone whose torque never reverses at rest (coulomb removes 0 %)
     (2168, "motor_lag", {"time_constant": 0.0}),  # a 6.3 ms current loop at 4 ms: the derivative form
     (2091, "saturation", {"beta": 0.0}),  # a current limit reached on 28 % of the samples at 11 ms
+    (2204, "delay", {"delay": 0.0}),  # a 7.2 ms delay at 14 ms, smooth command: the one-tick form
 ])
 def test_plants_of_the_development_set_name_their_effect(seed, effect, form):
-    """Plants of the independent family's development seeds (2000-2199), on which the look-alike rule, the
-    derivative form of motor_lag and saturation's beta = 0 were found: the hidden effect is named first."""
+    """Plants of the independent family's development seeds (2000-2399), on which the look-alike rule, the
+    derivative form of motor_lag, saturation's beta = 0 and delay's one-tick form were found: the hidden effect is
+    named first."""
     from servotau.experiments import plant_family as pf
 
     plant = pf.draw_plant(seed)

@@ -1,10 +1,11 @@
-"""Checks that the workbench's own preprocessing does not stand in for a physical effect.
+"""Checks that the workbench's own preprocessing, or a constant the model lacks, does not stand in for an effect.
 
 The velocity differentiated here (:mod:`.data`) is biased where the motion spans few samples of its window: a
 centred order-2 derivative's error grows with the third derivative of ``q``, which lag-like terms (delay, motor
 lag, inertia) and the dynamics and memory probes can fit. :func:`derivative_checks` gives the log again with less
 biased velocities; :func:`~.diagnose.diagnose` names such a term, and calls a log ``unexplained`` on such a probe,
-only when it survives every one of them.
+only when it survives every one of them. :func:`constant_error` measures what a constant offset would remove from a
+servo-error model without one.
 """
 
 from __future__ import annotations
@@ -13,9 +14,17 @@ from dataclasses import replace
 
 import numpy as np
 
-from .data import Dataset, differentiate, windows_text
+from servotau.actuator import Loss
+from servotau.actuator.terms import OFFSET
 
-__all__ = ["CHECK_ORDER", "derivative_checks", "faster_derivative", "recording_windows", "with_derivatives"]
+from ..data.folds import Fold
+from .data import Dataset, differentiate, windows_text
+from .evaluate import error_of
+from .model import ModelSpec
+from .probes import base_per_fold, heldout_prediction
+
+__all__ = ["CHECK_ORDER", "constant_error", "derivative_checks", "faster_derivative", "recording_windows",
+           "with_derivatives"]
 
 CHECK_ORDER = 4  # polynomial order of the cubic check: a first derivative's coefficients agree for orders 3 and 4
 # (dq is a cubic's); ddq is then a quartic's second derivative
@@ -87,3 +96,21 @@ def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:
     if min(windows) > CHECK_ORDER:  # a shorter window leaves the polynomial no freedom: finite differences again
         out.append((with_derivatives(ds, windows, order=CHECK_ORDER), f"dq by a cubic fit over the same {w0} samples"))
     return out
+
+
+def constant_error(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], e0: float, min_gain: float,
+                   cache: dict) -> tuple[str, ...]:
+    """The advice to rerun with ``--offset on`` when a constant offset would remove at least ``min_gain`` of the
+    held-out error ``e0`` of ``spec``, a servo-error model without one (same blocks); else empty. A constant error is
+    an encoder's zero, or a dead zone or friction under a load that never reverses: no other term tells them apart,
+    and without the offset the effects that stand in for it (or none) are named."""
+    if not ds.actuator or OFFSET in spec.linear or not e0 > 0:
+        return ()
+    with_offset = replace(spec, linear=(*spec.linear, OFFSET))
+    pred = heldout_prediction(base_per_fold(ds, with_offset, loss, folds, cache), ds.n)
+    gain = 1.0 - error_of(ds.target - pred, ds.target, loss) / e0
+    if not gain >= min_gain:
+        return ()
+    return (f"a constant error: an offset in the model, which it lacks, removes {100 * gain:.0f} % of the held-out "
+            "error (an encoder's zero, or a dead zone or friction under a load that never reverses): rerun the "
+            "diagnosis with --offset on (a motor model for control takes no offset)",)

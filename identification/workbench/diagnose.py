@@ -68,7 +68,7 @@ from servotau.actuator.terms import K_TAU, OFFSET
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
-from .checks import derivative_checks
+from .checks import constant_error, derivative_checks
 from .data import Dataset
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
@@ -321,6 +321,8 @@ def diagnose(
         checks += (f"{', '.join(constant)} lose their gain with a constant offset in the model, which it lacks: "
                    "rerun the diagnosis with --offset on (an encoder's zero, or a dead zone under a load of one "
                    "sign; a motor model for control takes no offset)",)
+    else:
+        checks += constant_error(ds, spec, loss, folds, e0, min_gain, cache)
     d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
     if d.verdict != "missing_effect" or not next_effect:
         return d
