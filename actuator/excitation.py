@@ -72,6 +72,8 @@ class Excitation:
         period_jitter: Robust spread of the time steps [periods] (:func:`period_jitter`).
         position_gap: Largest stretch [rad] of the positions sampled where a function of the position is known
             only from one or two samples (:func:`position_gap`; None without position).
+        position_dense: Longest stretch [rad] of the positions sampled densely (:func:`position_dense`; None without
+            position).
         command_curvature: How much the command ``q_des`` turns between two samples (:func:`curvature`; None
             without a command): small where it moves smoothly at the sample rate.
         unit_doubts: Values implausible in the role's unit (:func:`unit_doubts`).
@@ -106,6 +108,7 @@ class Excitation:
     tau_threshold: float | None = None
     period_jitter: float = 0.0
     position_gap: float | None = None
+    position_dense: float | None = None
     command_curvature: float | None = None
     unit_doubts: tuple[str, ...] = ()
     faults: tuple[str, ...] = ()
@@ -142,7 +145,8 @@ class Excitation:
             ]
         if self.position_range is not None:
             out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad, largest "
-                       f"stretch sampled fewer than 3 times {self.position_gap:.3g} rad")
+                       f"stretch sampled fewer than {VISITS} times per {100 // POSITION_BINS} % of the range "
+                       f"{self.position_gap:.3g} rad, longest sampled more often {self.position_dense:.3g} rad")
         if self.command_curvature is not None:
             out.append(f"command curvature {self.command_curvature:.2g} (its second difference over its first: "
                        "2 sin(pi / N) for a sine sampled N times a period, 1.4 for steps)")
@@ -193,18 +197,41 @@ def unit_doubts(q: np.ndarray | None, error: np.ndarray | None, tau: np.ndarray 
     return out
 
 
-def position_gap(q: np.ndarray, bins: int = 100, visits: int = 3) -> float:
-    """Largest stretch [rad] of the position range (its 1 % to 99 % quantiles, cut into ``bins``) without a bin
-    visited by ``visits`` samples: where a function of the position is known only from a sample or two."""
+POSITION_BINS = 100  # bins of the position range (its 1 % to 99 % quantiles) of position_gap and position_dense
+VISITS = 3  # samples in a bin where a function of the position is known
+
+
+def _visited(q: np.ndarray) -> tuple[np.ndarray, float]:
+    """Whether each of ``POSITION_BINS`` bins of the position range holds ``VISITS`` samples, and the bin width
+    [rad] (0 when the range is empty)."""
     lo, hi = np.quantile(q, (0.01, 0.99))
     if hi <= lo:
-        return 0.0
-    counts, _ = np.histogram(q, bins=bins, range=(lo, hi))
+        return np.ones(POSITION_BINS, dtype=bool), 0.0
+    counts, _ = np.histogram(q, bins=POSITION_BINS, range=(lo, hi))
+    return counts >= VISITS, float((hi - lo) / POSITION_BINS)
+
+
+def _longest_run(flags: np.ndarray) -> int:
     run = longest = 0
-    for c in counts:
-        run = run + 1 if c < visits else 0
+    for f in flags:
+        run = run + 1 if f else 0
         longest = max(longest, run)
-    return float((longest + 1) * (hi - lo) / bins) if longest else 0.0
+    return longest
+
+
+def position_gap(q: np.ndarray) -> float:
+    """Largest stretch [rad] of the position range without a bin visited by ``VISITS`` samples: where a function of
+    the position is known only from a sample or two."""
+    visited, width = _visited(q)
+    longest = _longest_run(~visited)
+    return (longest + 1) * width if longest else 0.0
+
+
+def position_dense(q: np.ndarray) -> float:
+    """Longest stretch [rad] of the position range whose every bin is visited by ``VISITS`` samples: where a function
+    of the position is known densely."""
+    visited, width = _visited(q)
+    return _longest_run(visited) * width
 
 
 def curvature(x: np.ndarray) -> float:
@@ -267,7 +294,7 @@ def excitation_report(signals: Signals) -> Excitation:
         rest_rev = _count_rest_reversals(tau, still, tau_threshold)
         loaded = float(np.count_nonzero(moving & (np.abs(tau) > 0.3 * peak)) / m)
     q = signals["q"] if "q" in signals else None
-    gap = None if q is None or q.size < 3 else position_gap(q)
+    gap, dense = (None, None) if q is None or q.size < 3 else (position_gap(q), position_dense(q))
     jitter = period_jitter(signals["t"], period)[0] if period and "t" in signals else 0.0
     error = signals["q_des"] - q if q is not None and "q_des" in signals else None
     doubts = unit_doubts(q, error, signals["tau_raw"] if "tau_raw" in signals else tau)
@@ -295,6 +322,7 @@ def excitation_report(signals: Signals) -> Excitation:
         tau_threshold=tau_threshold,
         period_jitter=jitter,
         position_gap=gap,
+        position_dense=dense,
         command_curvature=curvature(signals["q_des"]) if "q_des" in signals else None,
         unit_doubts=tuple(doubts),
         faults=(f"the position never changes (= {q[0]:.6g} rad): the joint never moved",)

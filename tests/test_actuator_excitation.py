@@ -116,6 +116,20 @@ def test_cogging_needs_positions_sampled_densely():
     assert position_gap(sweep) == 0.0
 
 
+def test_cogging_is_testable_from_a_densely_sampled_stretch_despite_gaps_elsewhere():
+    """0.3 rad swept densely, then a fast excursion to 1 rad sampled sparsely: a ripple of known period is fitted from
+    the dense stretch (2 periods of 0.04 rad, the shortest its 1 % bins resolve, fit in it); 0.05 rad is too short."""
+    def report(dense_end):
+        q = np.concatenate([np.linspace(0.0, dense_end, 3000), np.linspace(dense_end, 1.0, 120)])
+        t = np.arange(q.size) * 0.01
+        return excitation_report(Signals({"t": t, "q": q, "dq": np.gradient(q, 0.01), "tau": np.sin(t)}, 0.01, q.size))
+
+    wide, narrow = report(0.3), report(0.05)
+    assert wide.position_gap > 0.5 and wide.position_dense >= 0.28 and get_effect("cogging").needs(wide) is None
+    reason = get_effect("cogging").needs(narrow)
+    assert narrow.position_dense < 0.08 and "no stretch is sampled densely over 2 periods" in reason, reason
+
+
 def _servo_log(dt, seconds=None):
     seconds = seconds or max(4.0, 400 * dt)
     t = np.arange(0.0, seconds, dt)

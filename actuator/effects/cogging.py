@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..excitation import Excitation
+from ..excitation import POSITION_BINS, Excitation
 from ..registry import Effect
 from ..signals import Signals
 
@@ -19,6 +19,7 @@ ORDER = 90
 PERIODS = (0.01, 0.32)  # [rad] the shortest and longest ripple periods tried
 COARSE = tuple({"period": p} for p in np.geomspace(*PERIODS, 11).round(4).tolist())  # [rad] without positions
 SAMPLES_PER_PERIOD = 4  # positions sampled per ripple period (at most the largest gap apart) that resolve a ripple
+DENSE_PERIODS = 2  # ripple periods over a densely sampled stretch that resolve a ripple despite gaps elsewhere
 DRIFT = 0.125  # [periods] the largest phase drift, at either end of the sweep, of a ripple half a grid step off
 MIN_STEP = 0.05  # the finest relative step: short periods over a long sweep drift more (their cost grows as 1/step)
 
@@ -63,18 +64,26 @@ def scalar(x: Mapping[str, float], period: float, phase: float = 0.0) -> float:
 
 
 def needs(e: Excitation) -> str | None:
-    """A sweep of the position over several ripple periods."""
+    """A sweep of the position over several ripple periods, sampled densely enough for a period of the grid: no
+    gap in the positions sampled longer than a quarter of the grid's longest period, or a stretch sampled densely
+    over ``DENSE_PERIODS`` periods of a ripple it resolves (a ripple of known period is fitted from that stretch;
+    the sparse rest only adds samples)."""
     if e.position_range is None:
         return "no position column"
-    if e.position_range[1] - e.position_range[0] < 0.05:
-        return (f"position range {e.position_range[1] - e.position_range[0]:.3g} rad: expected >= 0.05 rad, a sweep "
-                "over several ripple periods")
+    span = e.position_range[1] - e.position_range[0]
+    if span < 0.05:
+        return f"position range {span:.3g} rad: expected >= 0.05 rad, a sweep over several ripple periods"
     longest = PERIODS[1]
-    if e.position_gap is not None and e.position_gap * SAMPLES_PER_PERIOD > longest:
-        return (f"cannot tell: the positions sampled leave gaps of {e.position_gap:.3g} rad: a ripple needs "
-                f">= {SAMPLES_PER_PERIOD} positions per period, so periods >= "
-                f"{SAMPLES_PER_PERIOD * e.position_gap:.3g} rad (the grid's longest is {longest:g} rad)")
-    return None
+    if e.position_gap is None or e.position_gap * SAMPLES_PER_PERIOD <= longest:
+        return None
+    shortest = max(PERIODS[0], SAMPLES_PER_PERIOD * span / POSITION_BINS)  # the dense stretch's bins resolve it
+    if e.position_dense is not None and e.position_dense >= DENSE_PERIODS * shortest:
+        return None
+    return (f"cannot tell: the positions sampled leave gaps of {e.position_gap:.3g} rad: a ripple needs "
+            f">= {SAMPLES_PER_PERIOD} positions per period, so periods >= "
+            f"{SAMPLES_PER_PERIOD * e.position_gap:.3g} rad (the grid's longest is {longest:g} rad), and no stretch "
+            f"is sampled densely over {DENSE_PERIODS} periods of {shortest:.3g} rad (the longest: "
+            f"{e.position_dense or 0.0:.3g} rad)")
 
 
 EFFECT = Effect(
