@@ -74,8 +74,6 @@ class Excitation:
             only from one or two samples (:func:`position_gap`; None without position).
         position_dense: Longest stretch [rad] of the positions sampled densely (:func:`position_dense`; None without
             position).
-        command_curvature: How much the command ``q_des`` turns between two samples (:func:`curvature`; None
-            without a command): small where it moves smoothly at the sample rate.
         unit_doubts: Values implausible in the role's unit (:func:`unit_doubts`).
         faults: What makes the log unfit to test any effect (a position that never changes).
         velocity_noise: Noise floor of ``dq`` [rad/s] (:func:`noise_floor`).
@@ -109,7 +107,6 @@ class Excitation:
     period_jitter: float = 0.0
     position_gap: float | None = None
     position_dense: float | None = None
-    command_curvature: float | None = None
     unit_doubts: tuple[str, ...] = ()
     faults: tuple[str, ...] = ()
 
@@ -147,9 +144,6 @@ class Excitation:
             out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad, largest "
                        f"stretch sampled fewer than {VISITS} times per {100 // POSITION_BINS} % of the range "
                        f"{self.position_gap:.3g} rad, longest sampled more often {self.position_dense:.3g} rad")
-        if self.command_curvature is not None:
-            out.append(f"command curvature {self.command_curvature:.2g} (its second difference over its first: "
-                       "2 sin(pi / N) for a sine sampled N times a period, 1.4 for steps)")
         if self.period_jitter > 0.0:
             out.append(f"time steps jitter by {100 * self.period_jitter:.0f} % of the period (robust spread)")
         out += [f"units doubted: {d}" for d in self.unit_doubts] + [f"fault: {f}" for f in self.faults]
@@ -234,16 +228,6 @@ def position_dense(q: np.ndarray) -> float:
     return _longest_run(visited) * width
 
 
-def curvature(x: np.ndarray) -> float:
-    """RMS of the second difference of ``x`` over the RMS of its first: ``2 sin(pi / N)`` for a sine sampled ``N``
-    times a period, about ``sqrt(2)`` for steps; 0 for fewer than 3 samples or a constant."""
-    x = np.asarray(x, dtype=np.float64)
-    if x.size < 3:
-        return 0.0
-    d1 = float(np.sqrt(np.mean(np.diff(x) ** 2)))
-    return float(np.sqrt(np.mean(np.diff(x, 2) ** 2)) / d1) if d1 > 0.0 else 0.0
-
-
 def _reversals(x: np.ndarray, threshold: float) -> int:
     """Sign changes of ``x`` counting only excursions beyond ``threshold``."""
     s = np.where(x > threshold, 1, np.where(x < -threshold, -1, 0))
@@ -323,7 +307,6 @@ def excitation_report(signals: Signals) -> Excitation:
         period_jitter=jitter,
         position_gap=gap,
         position_dense=dense,
-        command_curvature=curvature(signals["q_des"]) if "q_des" in signals else None,
         unit_doubts=tuple(doubts),
         faults=(f"the position never changes (= {q[0]:.6g} rad): the joint never moved",)
         if q is not None and q.size and np.ptp(q) == 0.0 else (),
@@ -376,21 +359,14 @@ class ResolvedGrid:
         return tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
 
 
-def steady_timing(e: Excitation, what: str) -> str | None:
-    """Why the log's time steps cannot resolve a ``what`` (e.g. "delay"): they jitter by more than ``JITTER_TOL``;
-    or None."""
-    if e.period_jitter > JITTER_TOL:
-        return (f"cannot tell: the time steps jitter by {100 * e.period_jitter:.0f} % of the period (more than "
-                f"{100 * JITTER_TOL:.0f} %): the timing cannot resolve a {what}")
-    return None
-
-
 def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
     """Why the log's timing resolves no shape of ``grid`` (``what``: e.g. "delay"), or None: time steps that
     jitter by more than ``JITTER_TOL``, or a sample period longer than every shape allows."""
-    jitter = steady_timing(e, what)
-    if jitter or grid.resolves(e.period):
-        return jitter
+    if e.period_jitter > JITTER_TOL:
+        return (f"cannot tell: the time steps jitter by {100 * e.period_jitter:.0f} % of the period (more than "
+                f"{100 * JITTER_TOL:.0f} %): the timing cannot resolve a {what}")
+    if grid.resolves(e.period):
+        return None
     ranges = []
     for k in grid.keys:
         values = sorted({g[k] for g in grid.shapes if g.get(k, 0.0) > 0.0})

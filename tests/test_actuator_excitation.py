@@ -73,10 +73,8 @@ def test_slow_and_fast_spans_are_samples_of_the_log_for_every_friction_effect():
 
 
 def test_lag_shapes_need_the_sample_period_to_resolve_them():
-    from servotau.actuator.effects import delay
-
     for name in ("delay", "motor_lag", "elastic", "backlash"):
-        grid = delay.RESOLVED if name == "delay" else get_effect(name).grid
+        grid = get_effect(name).grid
         assert isinstance(grid, ResolvedGrid)
         s1 = _servo_log(1e-3)
         assert len(get_effect(name).grid_for(s1)) == len(grid.shapes)  # 1 kHz resolves every shape
@@ -84,26 +82,7 @@ def test_lag_shapes_need_the_sample_period_to_resolve_them():
         reason = get_effect(name).needs(e)
         assert reason is not None and reason.startswith("cannot tell: the sample period 100 ms resolves no"), name
     shapes = get_effect("delay").grid_for(_servo_log(7e-3))
-    assert [g["delay"] for g in shapes] == [0.02, 0.0]  # 2 periods = 14 ms: the 20 ms delay and the one-tick form
-
-
-def test_a_delay_below_two_periods_needs_a_command_smooth_at_the_sample_rate():
-    """At 14 ms no delay of the grid is resolved: a smooth command interpolates a shorter one (the one-tick form),
-    a command of steps does not; nor does a log sampled slower than the grid's longest delay."""
-    from servotau.actuator.effects.delay import ONE_TICK, SMOOTH, delay_of
-
-    smooth = _servo_log(14e-3, seconds=30.0)
-    e = excitation_report(smooth)
-    assert e.command_curvature < SMOOTH and get_effect("delay").needs(e) is None
-    assert list(get_effect("delay").grid_for(smooth)) == [ONE_TICK]
-    t = smooth["t"]
-    steps = Signals({**{k: smooth[k] for k in ("t", "q", "dq", "tau")},
-                     "q_des": 0.3 * np.sign(np.sin(2 * np.pi * 0.7 * t))}, 14e-3, len(t))
-    e_steps = excitation_report(steps)
-    assert e_steps.command_curvature > 1.0 and "the command turns" in get_effect("delay").needs(e_steps)
-    slow = excitation_report(_servo_log(0.03, seconds=60.0))
-    assert "falls within a sample" in get_effect("delay").needs(slow)
-    assert delay_of(0.5, ONE_TICK, 14e-3) == 7e-3 and delay_of(0.5, {"delay": 0.02}, 14e-3) == 7e-3  # 1 tick
+    assert [g["delay"] for g in shapes] == [0.02]  # 2 periods = 14 ms: only the 20 ms delay
 
 
 def test_cogging_needs_positions_sampled_densely():

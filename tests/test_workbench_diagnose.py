@@ -301,12 +301,12 @@ def test_a_constant_error_is_not_named_as_a_lag():
     (2152, "deadzone", None),  # a driver dead zone whose torque never reverses at rest (coulomb removes 0 %)
     (2168, "motor_lag", {"time_constant": 0.0}),  # a 6.3 ms current loop at 4 ms: the derivative form
     (2091, "saturation", {"beta": 0.0}),  # a current limit reached on 28 % of the samples at 11 ms
-    (2204, "delay", {"delay": 0.0}),  # a 7.2 ms delay at 14 ms, smooth command: the one-tick form
+    (2364, "cogging", None),  # a ripple swept densely over 60 % of the range, sparsely elsewhere, at 15 ms
 ])
 def test_plants_of_the_development_set_name_their_effect(seed, effect, form):
     """Plants of the independent family's development seeds (2000-2399), on which the look-alike rule, the
-    derivative form of motor_lag, saturation's beta = 0 and delay's one-tick form were found: the hidden effect is
-    named first."""
+    derivative form of motor_lag, saturation's beta = 0 and the dense stretch of cogging were found: the hidden
+    effect is named first."""
     from servotau.experiments import plant_family as pf
 
     plant = pf.draw_plant(seed)

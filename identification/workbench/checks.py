@@ -28,6 +28,7 @@ __all__ = ["CHECK_ORDER", "constant_error", "derivative_checks", "faster_derivat
 
 CHECK_ORDER = 4  # polynomial order of the cubic check: a first derivative's coefficients agree for orders 3 and 4
 # (dq is a cubic's); ddq is then a quartic's second derivative
+SMOOTH_CHECK_ORDER = 4  # polynomial order of the torque's check (smoothing_check)
 FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 over 3 samples: the central difference)
 
 
@@ -52,10 +53,10 @@ def _differentiated_here(ds: Dataset) -> bool:
         and "q" in ds.signals
 
 
-def recording_windows(ds: Dataset) -> list[tuple[int, int, float]]:
-    """``(first row, dq window [samples], sample period [s])`` of each recording of ``ds`` whose velocity was
-    differentiated here (one entry for a single log)."""
-    info = ds.preprocessing["dq"]
+def recording_windows(ds: Dataset, key: str = "dq") -> list[tuple[int, int, float]]:
+    """``(first row, window [samples], sample period [s])`` of each recording of ``ds`` whose ``key`` (``dq``:
+    the velocity, ``tau``: the torque) was filtered here (one entry for a single log)."""
+    info = ds.preprocessing[key]
     return list(info.get("windows", ((0, info["window"], ds.dt),)))
 
 
@@ -63,19 +64,38 @@ def with_derivatives(ds: Dataset, windows: list[int], order: int | None = None) 
     """``ds`` with ``dq`` (and ``ddq``, unless the log has its own) differentiated again from ``q``, each recording
     on its own runs and period with its window of ``windows`` (``ddq`` over twice it), of polynomial ``order``
     (default as :func:`differentiate`)."""
-    parts = recording_windows(ds)
-    q, runs = ds.signals["q"], ds.signals.runs()
-    ends = [a for a, _, _ in parts[1:]] + [ds.n]
-
-    def per_recording(deriv: int) -> np.ndarray:
-        return np.concatenate([differentiate(q[a:b], [(x - a, y - a) for x, y in runs if a <= x < b], dt, deriv,
-                                             w if deriv == 1 else 2 * w - 1, order=order)
-                               for (a, _, dt), b, w in zip(parts, ends, windows, strict=True)])
-
-    cols = {"dq": per_recording(1)}
+    cols = {"dq": _per_recording(ds, ds.signals["q"], windows, 1, order)}
     if "ddq_est" not in ds.signals:
-        cols["ddq"] = per_recording(2)
+        cols["ddq"] = _per_recording(ds, ds.signals["q"], windows, 2, order)
     return replace(ds, signals=ds.signals.with_columns(**cols))
+
+
+def _per_recording(ds: Dataset, x: np.ndarray, windows: list[int], deriv: int, order: int | None,
+                   key: str = "dq") -> np.ndarray:
+    """The ``deriv``-th derivative of ``x`` (0: smoothed), each recording of ``ds`` (as filtered for ``key``) on its
+    own runs and period with its window of ``windows`` (twice it, less one, for ``deriv`` 2)."""
+    parts = recording_windows(ds, key)
+    runs = ds.signals.runs()
+    ends = [a for a, _, _ in parts[1:]] + [ds.n]
+    return np.concatenate([differentiate(x[a:b], [(r - a, e - a) for r, e in runs if a <= r < b], dt, deriv,
+                                         w if deriv < 2 else 2 * w - 1, order=order)
+                           for (a, _, dt), b, w in zip(parts, ends, windows, strict=True)])
+
+
+def smoothing_check(ds: Dataset) -> tuple[Dataset, str] | None:
+    """``ds`` with the torque smoothed less biased than the workbench's own, by a quartic fit over the same window
+    (the order-2 fit's error grows with the torque's second derivative, a lag-like term's own signature), and how;
+    None when the torque is the log's own or its window is under ``2 SMOOTH_CHECK_ORDER + 3`` samples (a quartic
+    over fewer samples hardly smooths: the raw noise would decide the check)."""
+    info = ds.preprocessing.get("tau", {})
+    if info.get("source") != "smoothed" or "tau_raw" not in ds.signals or ds.dt is None:
+        return None
+    windows = [w for _, w, _ in recording_windows(ds, "tau")]
+    if min(windows) < 2 * SMOOTH_CHECK_ORDER + 3:
+        return None
+    tau = _per_recording(ds, ds.signals["tau_raw"], windows, 0, SMOOTH_CHECK_ORDER, key="tau")
+    return (replace(ds, signals=ds.signals.with_columns(tau=tau)),
+            f"tau smoothed by a quartic fit over the same {info['window']} samples")
 
 
 def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:

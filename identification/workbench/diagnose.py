@@ -32,10 +32,12 @@ differentiated here (not the log's own), a lag-like effect (family ``dynamics``:
 elastic, backlash) that would be named is re-scored with less biased velocities (:func:`~.checks.derivative_checks`:
 over half the window, and a cubic fit over the same window); if its held-out gain with either falls below
 ``min_gain`` it is not named but reported untestable, "cannot tell: may be the differentiation's error", and the
-next effect is considered. On a servo-error log whose model has no constant offset, such an effect is also
-re-scored with one: a constant error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``,
-and lag-like terms fit the bias ("cannot tell: may be a constant error"; the message says to rerun with the
-offset).
+next effect is considered; likewise with the torque smoothed by a quartic fit (:func:`~.checks.smoothing_check`:
+a long order-2 smoothing of a noisy torque errs where the torque bends, "may be the torque smoothing's error").
+On a servo-error log whose model has no constant offset, such an effect is also re-scored with one: a constant
+error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``, and lag-like terms fit the bias
+("cannot tell: may be a constant error"; the message says to rerun with the offset). Whatever the verdict, the
+message says what an offset alone would remove when that is at least ``min_gain`` (:func:`~.checks.constant_error`).
 
 Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
 ranked but never named: they are reported as untestable, not as absent. A reason that is only a look-alike's
@@ -68,7 +70,7 @@ from servotau.actuator.terms import K_TAU, OFFSET
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
-from .checks import constant_error, derivative_checks
+from .checks import constant_error, derivative_checks, smoothing_check
 from .data import Dataset
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
@@ -379,7 +381,8 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
              min_gain: float) -> list[Candidate]:
     """``ranking`` (sorted) where a lag-like effect (family ``dynamics``) that would come first and be named keeps
     its place only if it still removes ``min_gain`` with every less biased derivative
-    (:func:`~.checks.derivative_checks`) and, on a servo-error log whose model has no constant offset, with one (a
+    (:func:`~.checks.derivative_checks`), with a less biased torque smoothing (:func:`~.checks.smoothing_check`)
+    and, on a servo-error log whose model has no constant offset, with one (a
     constant error, e.g. an encoder's zero or a dead zone under a load of one sign, biases ``k_tau``, and lag-like
     terms fit the bias). Otherwise it is untestable, saying why, and the next one is considered. Friction-like
     effects are not checked against the offset: a dead zone under a load of mostly one sign, or an asymmetric
@@ -393,8 +396,12 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
         if i is None or ranking[i].family != "dynamics":
             break
         top = ranking[i]
-        derivatives = derivative_checks(ds) if derivatives is None else derivatives
-        alternatives = [(d, spec, f"with {how}", "the differentiation's error") for d, how in derivatives]
+        if derivatives is None:
+            derivatives = [(d, f"with {how}", "the differentiation's error") for d, how in derivative_checks(ds)]
+            smoothed = smoothing_check(ds)
+            if smoothed is not None:
+                derivatives.append((smoothed[0], f"with {smoothed[1]}", "the torque smoothing's error"))
+        alternatives = [(d, spec, how, cause) for d, how, cause in derivatives]
         if offset is not None:
             alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)",
                                  CONSTANT_ERROR))
