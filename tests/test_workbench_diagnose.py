@@ -318,6 +318,22 @@ def test_plants_of_the_development_set_name_their_effect(seed, effect, form):
     assert form is None or all(d.top.shape[k] == v for k, v in form.items()), d.top.shape
 
 
+@pytest.mark.slow  # 8 s
+def test_a_clean_plant_whose_torque_was_smoothed_long_is_not_named_a_delay():
+    """Development plant 2603 forced clean (6 ms, a noisy torque smoothed over 69 samples): the long order-2
+    smoothing's error looked like a delay (17 %); with the torque smoothed by a quartic fit over the same window the
+    delay removes 3 %, it is untestable for that reason, and nothing is named."""
+    from servotau.experiments import plant_family as pf
+
+    plant = pf.draw_plant(2603, hidden=())
+    (true,) = pf.simulate([plant])
+    ds = load_dataset(dict(pf.measure(plant, true)))
+    assert ds.preprocessing["tau"]["window"] == 69
+    d = diagnose(ds, parse_spec("paper", ds.signals))
+    assert d.verdict != "missing_effect", d.message
+    assert "torque smoothing's error" in d.candidate("delay").reason, d.candidate("delay").reason
+
+
 def test_a_torque_constant_falling_with_heat_is_named_in_the_gain_form():
     """The servo needs more error for the same torque as the winding heats (the torque part scaled by 1 + a h):
     thermal_drift is named in its gain form (-h u_tau), with the coefficient -a."""

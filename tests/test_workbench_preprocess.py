@@ -147,3 +147,23 @@ def test_the_cubic_check_is_less_biased_than_the_workbench_velocity_at_a_coarse_
     inner = slice(10, -10)
     err = lambda x: np.sqrt(np.mean((x.signals["dq"][inner] - dq[inner]) ** 2))  # noqa: E731
     assert err(checks["dq by a cubic fit over the same 7 samples"]) < 0.3 * err(ds)
+
+
+def test_the_torque_check_is_less_biased_than_a_long_order_2_smoothing():
+    """A torque bending within the smoothing window (a 2 Hz sine smoothed over 69 samples of 6 ms): the order-2 fit over
+    the window flattens its peaks, the quartic over the same window much less; a window under 11 samples gets no
+    check (a quartic there hardly smooths)."""
+    from servotau.identification.workbench.checks import smoothing_check
+
+    dt = 6e-3
+    t = np.arange(0.0, 20.0, dt)
+    tau = 10 * np.sin(2 * np.pi * 2 * t)
+    q = 0.2 * np.sin(2 * np.pi * 0.5 * t)
+    ds = load_dataset({"t": t, "q": q, "q_des": q + 1e-4 * tau, "tau": tau}, smooth_torque_s=69 * dt)
+    checked, how = smoothing_check(ds)
+    assert how == "tau smoothed by a quartic fit over the same 69 samples"
+    inner = slice(40, -40)
+    err = lambda x: np.sqrt(np.mean((x.signals["tau"][inner] - tau[inner]) ** 2))  # noqa: E731
+    assert err(checked) < 0.3 * err(ds)
+    short = load_dataset({"t": t, "q": q, "q_des": q + 1e-4 * tau, "tau": tau}, smooth_torque_s=9 * dt)
+    assert smoothing_check(short) is None

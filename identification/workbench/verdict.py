@@ -20,7 +20,7 @@ from servotau.actuator import EXPERIMENTS, Effect, Excitation, get_effect
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
-from .checks import derivative_checks
+from .checks import derivative_checks, smoothing_check
 from .data import Dataset
 from .evaluate import Comparison, error_of
 from .model import FittedModel, ModelSpec, design, fit_spec
@@ -298,18 +298,21 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
                    ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...]]:
     """``probes`` with the gains of ``CHECKED_PROBES`` that would call the log ``unexplained`` (no effect named)
     replaced by the smallest of theirs and the same probe's with each less biased derivative
-    (:func:`~.checks.derivative_checks`);
+    (:func:`~.checks.derivative_checks`) and with a less biased torque smoothing (:func:`~.checks.smoothing_check`);
     and a sentence per probe that fell below the threshold. Unchanged when an effect is named, no such probe
     reaches ``PROBE_FACTOR * min_gain`` or the velocity is the log's own."""
     out = dict(probes)
     if any(nameable(c, min_gain) for c in ranking):
         return out, ()
     todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
-    checks = derivative_checks(ds) if todo else []
+    checks = [(d, how, "the differentiation's error") for d, how in derivative_checks(ds)] if todo else []
+    smoothed = smoothing_check(ds) if todo else None
+    if smoothed is not None:
+        checks.append((*smoothed, "the torque smoothing's error"))
     if not checks:
         return out, ()
     notes = []
-    for fds, how in checks:
+    for fds, how, cause in checks:
         cache: dict = {}
         try:
             bases = base_per_fold(fds, spec, loss, folds, cache)
@@ -325,7 +328,7 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
             if g < out[k]:
                 if g < PROBE_FACTOR * min_gain <= out[k]:
                     notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % with "
-                                 f"{how}: it may be the differentiation's error")
+                                 f"{how}: it may be {cause}")
                 out[k] = g
     return out, tuple(notes)
 
