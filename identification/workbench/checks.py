@@ -24,7 +24,7 @@ from .model import ModelSpec
 from .probes import base_per_fold, heldout_prediction
 
 __all__ = ["CHECK_ORDER", "constant_error", "derivative_checks", "faster_derivative", "recording_windows",
-           "with_derivatives"]
+           "smoothing_check", "with_derivatives"]
 
 CHECK_ORDER = 4  # polynomial order of the cubic check: a first derivative's coefficients agree for orders 3 and 4
 # (dq is a cubic's); ddq is then a quartic's second derivative
@@ -84,7 +84,8 @@ def _per_recording(ds: Dataset, x: np.ndarray, windows: list[int], deriv: int, o
 
 def smoothing_check(ds: Dataset) -> tuple[Dataset, str] | None:
     """``ds`` with the torque smoothed less biased than the workbench's own, by a quartic fit over the same window
-    (the order-2 fit's error grows with the torque's second derivative, a lag-like term's own signature), and how;
+    (the centred order-2 fit's error grows with the torque's fourth derivative, the quartic's with its sixth: a long
+    window's error follows the torque's bends, which lag-like terms fit), and how;
     None when the torque is the log's own or its window is under ``2 SMOOTH_CHECK_ORDER + 3`` samples (a quartic
     over fewer samples hardly smooths: the raw noise would decide the check)."""
     info = ds.preprocessing.get("tau", {})
