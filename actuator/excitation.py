@@ -141,9 +141,11 @@ class Excitation:
                 f"loaded motion (|tau| > 30 % of its peak while moving): {100 * self.loaded_motion:.0f} %",
             ]
         if self.position_range is not None:
-            out.append(f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad, largest "
-                       f"stretch sampled fewer than {VISITS} times per {100 // POSITION_BINS} % of the range "
-                       f"{self.position_gap:.3g} rad, longest sampled more often {self.position_dense:.3g} rad")
+            line = f"position range [{self.position_range[0]:.4g}, {self.position_range[1]:.4g}] rad"
+            if self.position_gap is not None and self.position_dense is not None:
+                line += (f", largest stretch sampled fewer than {VISITS} times per {100 / POSITION_BINS:g} % of the "
+                         f"range {self.position_gap:.3g} rad, longest sampled more often {self.position_dense:.3g} rad")
+            out.append(line)
         if self.period_jitter > 0.0:
             out.append(f"time steps jitter by {100 * self.period_jitter:.0f} % of the period (robust spread)")
         out += [f"units doubted: {d}" for d in self.unit_doubts] + [f"fault: {f}" for f in self.faults]

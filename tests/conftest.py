@@ -48,5 +48,6 @@ def pytest_collection_modifyitems(config, items):
     from support import workbench_cases
 
     workbench_cases.PREFETCH_SLOW = any(item.get_closest_marker("slow") for item in items)
-    if not config.option.collectonly and any(getattr(item.module, "__name__", "") in CASE_READERS for item in items):
+    readers = (getattr(getattr(item, "module", None), "__name__", "") in CASE_READERS for item in items)
+    if not config.option.collectonly and any(readers):
         workbench_cases.prefetch()

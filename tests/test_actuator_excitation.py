@@ -4,6 +4,8 @@ one needed. Generated logs, no diagnosis (fast)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from servotau.actuator import Signals, excitation_report, get_effect
@@ -107,6 +109,9 @@ def test_cogging_is_testable_from_a_densely_sampled_stretch_despite_gaps_elsewhe
     assert wide.position_gap > 0.5 and wide.position_dense >= 0.28 and get_effect("cogging").needs(wide) is None
     reason = get_effect("cogging").needs(narrow)
     assert narrow.position_dense < 0.08 and "no stretch is sampled densely over 2 periods" in reason, reason
+    coarse = replace(wide, position_range=(0.0, 10.0), position_gap=0.5, position_dense=0.9)  # 4 bins: 0.4 rad
+    assert "cannot tell" in get_effect("cogging").needs(coarse)  # longer than the grid's longest period
+    assert any(line.startswith("position range") for line in replace(wide, position_gap=None).lines())
 
 
 def _servo_log(dt, seconds=None):

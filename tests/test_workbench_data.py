@@ -108,6 +108,9 @@ def test_torque_alignment_finds_an_estimator_delay():
     ds2, shift2 = align_torque(load_dataset(static, smooth_torque_s=0.0))
     assert shift2 == pytest.approx(0.008)
     assert any("advanced by 8 ms" in n for n in ds2.notes)
+    smoothed, _ = align_torque(load_dataset(static, smooth_torque_s=0.021))  # the raw torque is re-timed too
+    raw = smoothed.signals["tau_raw"]
+    assert np.max(np.abs(raw[20:-20] - tau[20:-20])) < 1e-9  # the torque check re-smooths it (checks.smoothing_check)
 
 
 def test_servotau_log_with_only_the_ground_truth_torque_is_an_error_not_a_silent_fallback():

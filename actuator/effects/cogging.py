@@ -76,8 +76,9 @@ def needs(e: Excitation) -> str | None:
     longest = PERIODS[1]
     if e.position_gap is None or e.position_gap * SAMPLES_PER_PERIOD <= longest:
         return None
-    shortest = max(PERIODS[0], SAMPLES_PER_PERIOD * span / POSITION_BINS)  # the dense stretch's bins resolve it
-    if e.position_dense is not None and e.position_dense >= DENSE_PERIODS * shortest:
+    # the shortest period with SAMPLES_PER_PERIOD bins (a bin is 1 % of the 1-99 % quantile range, at most of span)
+    shortest = max(PERIODS[0], SAMPLES_PER_PERIOD * span / POSITION_BINS)
+    if shortest <= longest and e.position_dense is not None and e.position_dense >= DENSE_PERIODS * shortest:
         return None
     return (f"cannot tell: the positions sampled leave gaps of {e.position_gap:.3g} rad: a ripple needs "
             f">= {SAMPLES_PER_PERIOD} positions per period, so periods >= "

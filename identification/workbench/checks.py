@@ -4,8 +4,9 @@ The velocity differentiated here (:mod:`.data`) is biased where the motion spans
 centred order-2 derivative's error grows with the third derivative of ``q``, which lag-like terms (delay, motor
 lag, inertia) and the dynamics and memory probes can fit. :func:`derivative_checks` gives the log again with less
 biased velocities; :func:`~.diagnose.diagnose` names such a term, and calls a log ``unexplained`` on such a probe,
-only when it survives every one of them. :func:`constant_error` measures what a constant offset would remove from a
-servo-error model without one.
+only when it survives every one of them. :func:`smoothing_check` does the same for the torque's smoothing (a long
+order-2 smoothing errs where the torque bends); :func:`preprocessing_checks` gives all of them. :func:`constant_error`
+measures what a constant offset would remove from a servo-error model without one.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from .evaluate import error_of
 from .model import ModelSpec
 from .probes import base_per_fold, heldout_prediction
 
-__all__ = ["CHECK_ORDER", "constant_error", "derivative_checks", "faster_derivative", "recording_windows",
-           "smoothing_check", "with_derivatives"]
+__all__ = ["CHECK_ORDER", "constant_error", "derivative_checks", "faster_derivative", "preprocessing_checks",
+           "recording_windows", "smoothing_check", "with_derivatives"]
 
 CHECK_ORDER = 4  # polynomial order of the cubic check: a first derivative's coefficients agree for orders 3 and 4
 # (dq is a cubic's); ddq is then a quartic's second derivative
@@ -135,3 +136,14 @@ def constant_error(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], 
     return (f"a constant error: an offset in the model, which it lacks, removes {100 * gain:.0f} % of the held-out "
             "error (an encoder's zero, or a dead zone or friction under a load that never reverses): rerun the "
             "diagnosis with --offset on (a motor model for control takes no offset)",)
+
+
+def preprocessing_checks(ds: Dataset) -> list[tuple[Dataset, str, str]]:
+    """Every check of the workbench's preprocessing, as ``(dataset, how, cause)``: :func:`derivative_checks` (the
+    differentiation's error) and :func:`smoothing_check` (the torque smoothing's error). Empty when the velocity and
+    the torque are the log's own."""
+    out = [(d, how, "the differentiation's error") for d, how in derivative_checks(ds)]
+    smoothed = smoothing_check(ds)
+    if smoothed is not None:
+        out.append((*smoothed, "the torque smoothing's error"))
+    return out

@@ -478,6 +478,8 @@ def align_torque(ds: Dataset, max_shift_s: float = 0.03) -> tuple[Dataset, float
             best, best_c = k, c
     if best == 0:
         return ds, 0.0
-    sig = ds.signals.with_columns(tau=per_run(lambda x: shift(x, best, fill="hold"), ds.signals.starts, tau))
+    cols = {k: per_run(lambda x: shift(x, best, fill="hold"), ds.signals.starts, ds.signals[k])
+            for k in ("tau", "tau_raw") if k in ds.signals}  # the raw torque too: the torque check re-smooths it
+    sig = ds.signals.with_columns(**cols)
     note = f"tau: advanced by {best * ds.dt * 1e3:.0f} ms to match the encoders (estimator delay)"
     return replace(ds, signals=sig, notes=(*ds.notes, note)), best * ds.dt

@@ -37,7 +37,8 @@ a long order-2 smoothing of a noisy torque errs where the torque bends, "may be 
 On a servo-error log whose model has no constant offset, such an effect is also re-scored with one: a constant
 error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``, and lag-like terms fit the bias
 ("cannot tell: may be a constant error"; the message says to rerun with the offset). Whatever the verdict, the
-message says what an offset alone would remove when that is at least ``min_gain`` (:func:`~.checks.constant_error`).
+message says what an offset alone would remove when that is at least ``min_gain`` (:func:`~.checks.constant_error`),
+unless a lag-like effect already lost its gain to the offset (the message then says to add it).
 
 Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
 ranked but never named: they are reported as untestable, not as absent. A reason that is only a look-alike's
@@ -70,7 +71,7 @@ from servotau.actuator.terms import K_TAU, OFFSET
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
-from .checks import constant_error, derivative_checks, smoothing_check
+from .checks import constant_error, preprocessing_checks
 from .data import Dataset
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
@@ -387,7 +388,7 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
     terms fit the bias). Otherwise it is untestable, saying why, and the next one is considered. Friction-like
     effects are not checked against the offset: a dead zone under a load of mostly one sign, or an asymmetric
     Coulomb friction on a joint that rarely rests, is partly a constant and still physical."""
-    derivatives = None
+    checks = None
     offset = None
     if ds.actuator and OFFSET not in spec.linear:
         offset = replace(spec, linear=(*spec.linear, OFFSET))
@@ -396,12 +397,8 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
         if i is None or ranking[i].family != "dynamics":
             break
         top = ranking[i]
-        if derivatives is None:
-            derivatives = [(d, f"with {how}", "the differentiation's error") for d, how in derivative_checks(ds)]
-            smoothed = smoothing_check(ds)
-            if smoothed is not None:
-                derivatives.append((smoothed[0], f"with {smoothed[1]}", "the torque smoothing's error"))
-        alternatives = [(d, spec, how, cause) for d, how, cause in derivatives]
+        checks = preprocessing_checks(ds) if checks is None else checks
+        alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in checks]
         if offset is not None:
             alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)",
                                  CONSTANT_ERROR))

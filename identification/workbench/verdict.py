@@ -20,7 +20,7 @@ from servotau.actuator import EXPERIMENTS, Effect, Excitation, get_effect
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
-from .checks import derivative_checks, smoothing_check
+from .checks import preprocessing_checks
 from .data import Dataset
 from .evaluate import Comparison, error_of
 from .model import FittedModel, ModelSpec, design, fit_spec
@@ -49,9 +49,9 @@ LOOKALIKE_SHARE = 0.5
 tested where each of them removes at most this share of the held-out error it removes (:func:`lookalikes_apart`)."""
 
 CHECKED_PROBES = ("dynamics", "memory")
-"""Probes that the differentiation's own error can feed (lagged inputs; the residual's past, smooth over the
-velocity's window): before they call a log ``unexplained`` they are re-run with each less biased derivative
-(:func:`recheck_probes`), and the smallest gain counts."""
+"""Probes that the preprocessing's own error can feed (lagged inputs; the residual's past, smooth over the
+velocity's or the torque's window): before they call a log ``unexplained`` they are re-run with each less biased
+derivative and torque smoothing (:func:`recheck_probes`), and the smallest gain counts."""
 
 
 @dataclass(frozen=True)
@@ -298,17 +298,14 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
                    ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...]]:
     """``probes`` with the gains of ``CHECKED_PROBES`` that would call the log ``unexplained`` (no effect named)
     replaced by the smallest of theirs and the same probe's with each less biased derivative
-    (:func:`~.checks.derivative_checks`) and with a less biased torque smoothing (:func:`~.checks.smoothing_check`);
-    and a sentence per probe that fell below the threshold. Unchanged when an effect is named, no such probe
-    reaches ``PROBE_FACTOR * min_gain`` or the velocity is the log's own."""
+    and with a less biased torque smoothing (:func:`~.checks.preprocessing_checks`); and a sentence per probe that
+    fell below the threshold. Unchanged when an effect is named, no such probe reaches ``PROBE_FACTOR * min_gain``
+    or no check applies (the velocity and the torque are the log's own)."""
     out = dict(probes)
     if any(nameable(c, min_gain) for c in ranking):
         return out, ()
     todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
-    checks = [(d, how, "the differentiation's error") for d, how in derivative_checks(ds)] if todo else []
-    smoothed = smoothing_check(ds) if todo else None
-    if smoothed is not None:
-        checks.append((*smoothed, "the torque smoothing's error"))
+    checks = preprocessing_checks(ds) if todo else []
     if not checks:
         return out, ()
     notes = []
