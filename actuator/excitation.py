@@ -71,9 +71,9 @@ class Excitation:
         period: Sample period [s] (None without time).
         period_jitter: Robust spread of the time steps [periods] (:func:`period_jitter`).
         position_gap: Largest stretch [rad] of the positions sampled where a function of the position is known
-            only from one or two samples (:func:`position_gap`; None without position).
-        position_dense: Longest stretch [rad] of the positions sampled densely (:func:`position_dense`; None without
-            position).
+            only from one or two samples (:func:`position_coverage`; None without position).
+        position_dense: Longest stretch [rad] of the positions sampled densely (:func:`position_coverage`; None
+            without position).
         unit_doubts: Values implausible in the role's unit (:func:`unit_doubts`).
         faults: What makes the log unfit to test any effect (a position that never changes).
         velocity_noise: Noise floor of ``dq`` [rad/s] (:func:`noise_floor`).
@@ -193,7 +193,7 @@ def unit_doubts(q: np.ndarray | None, error: np.ndarray | None, tau: np.ndarray 
     return out
 
 
-POSITION_BINS = 100  # bins of the position range (its 1 % to 99 % quantiles) of position_gap and position_dense
+POSITION_BINS = 100  # bins of the position range (its 1 % to 99 % quantiles) of position_coverage
 VISITS = 3  # samples in a bin where a function of the position is known
 
 
@@ -215,19 +215,13 @@ def _longest_run(flags: np.ndarray) -> int:
     return longest
 
 
-def position_gap(q: np.ndarray) -> float:
-    """Largest stretch [rad] of the position range without a bin visited by ``VISITS`` samples: where a function of
-    the position is known only from a sample or two."""
+def position_coverage(q: np.ndarray) -> tuple[float, float]:
+    """``(gap, dense)`` [rad] of the position range, from one histogram: the largest stretch without a bin visited by
+    ``VISITS`` samples (where a function of the position is known only from a sample or two), and the longest
+    stretch whose every bin is (where it is known densely)."""
     visited, width = _visited(q)
-    longest = _longest_run(~visited)
-    return (longest + 1) * width if longest else 0.0
-
-
-def position_dense(q: np.ndarray) -> float:
-    """Longest stretch [rad] of the position range whose every bin is visited by ``VISITS`` samples: where a function
-    of the position is known densely."""
-    visited, width = _visited(q)
-    return _longest_run(visited) * width
+    sparse = _longest_run(~visited)
+    return ((sparse + 1) * width if sparse else 0.0), _longest_run(visited) * width
 
 
 def _reversals(x: np.ndarray, threshold: float) -> int:
@@ -280,7 +274,7 @@ def excitation_report(signals: Signals) -> Excitation:
         rest_rev = _count_rest_reversals(tau, still, tau_threshold)
         loaded = float(np.count_nonzero(moving & (np.abs(tau) > 0.3 * peak)) / m)
     q = signals["q"] if "q" in signals else None
-    gap, dense = (None, None) if q is None or q.size < 3 else (position_gap(q), position_dense(q))
+    gap, dense = (None, None) if q is None or q.size < 3 else position_coverage(q)
     jitter = period_jitter(signals["t"], period)[0] if period and "t" in signals else 0.0
     error = signals["q_des"] - q if q is not None and "q_des" in signals else None
     doubts = unit_doubts(q, error, signals["tau_raw"] if "tau_raw" in signals else tau)

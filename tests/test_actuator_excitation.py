@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from servotau.actuator import Signals, excitation_report, get_effect
-from servotau.actuator.excitation import ResolvedGrid, noise_floor, position_gap
+from servotau.actuator.excitation import ResolvedGrid, noise_floor, position_coverage
 
 
 def _friction_log(peak=0.005, reverse=True, dt=1e-3, seconds=20.0, seed=0):
@@ -94,7 +94,7 @@ def test_cogging_needs_positions_sampled_densely():
     e = excitation_report(s)
     assert e.position_gap > 0.2 and get_effect("cogging").needs(e).startswith("cannot tell")
     sweep = np.linspace(-1, 1, 5000)
-    assert position_gap(sweep) == 0.0
+    assert position_coverage(sweep)[0] == 0.0
 
 
 def test_cogging_is_testable_from_a_densely_sampled_stretch_despite_gaps_elsewhere():

@@ -388,7 +388,7 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
     terms fit the bias). Otherwise it is untestable, saying why, and the next one is considered. Friction-like
     effects are not checked against the offset: a dead zone under a load of mostly one sign, or an asymmetric
     Coulomb friction on a joint that rarely rests, is partly a constant and still physical."""
-    checks = None
+    preprocessed = None  # the log with less biased preprocessing (checks.preprocessing_checks), built on first need
     offset = None
     if ds.actuator and OFFSET not in spec.linear:
         offset = replace(spec, linear=(*spec.linear, OFFSET))
@@ -397,8 +397,8 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
         if i is None or ranking[i].family != "dynamics":
             break
         top = ranking[i]
-        checks = preprocessing_checks(ds) if checks is None else checks
-        alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in checks]
+        preprocessed = preprocessing_checks(ds) if preprocessed is None else preprocessed
+        alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in preprocessed]
         if offset is not None:
             alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)",
                                  CONSTANT_ERROR))
