@@ -6,6 +6,8 @@ Wall time in the multi-process fixtures is a safety net only: the tests assert r
 
 from __future__ import annotations
 
+import os
+
 import pytest
 from support.hal import endpoint, free_port, robot_server
 
@@ -44,10 +46,12 @@ def _workbench_pool():
 def pytest_collection_modifyitems(config, items):
     """Start simulating the workbench's cases as the session starts, when a test reading them is selected: the
     suite's other tests keep one core busy, the cases' worker processes use the other one meanwhile. The slow
-    cases are prefetched only when a slow test is selected (tests/support/workbench_cases)."""
+    cases are prefetched only when a slow test is selected (tests/support/workbench_cases). Under pytest-xdist
+    (`make test` runs 2 workers, which keep both cores busy) every worker collects every test, so the cases start
+    on the first test reading them instead, in that test's worker only."""
     from support import workbench_cases
 
     workbench_cases.PREFETCH_SLOW = any(item.get_closest_marker("slow") for item in items)
     readers = (getattr(getattr(item, "module", None), "__name__", "") in CASE_READERS for item in items)
-    if not config.option.collectonly and any(readers):
+    if not config.option.collectonly and "PYTEST_XDIST_WORKER" not in os.environ and any(readers):
         workbench_cases.prefetch()

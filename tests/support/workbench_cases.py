@@ -2,8 +2,8 @@
 
 The workbench tests import :func:`outcome`, :func:`sim_log` and :data:`REFERENCE` from here. The session
 starts simulating every log the selected tests need and running the workbench on each (tests/conftest.py calls
-:func:`prefetch` after collection), two cases at a time in background worker processes (one BLAS thread each);
-each call waits for its own case only.
+:func:`prefetch` after collection; under pytest-xdist the first call of :func:`outcome` does), two cases at a
+time in background worker processes (one BLAS thread each); each call waits for its own case only.
 Logs are also kept in ``.pytest_cache/servotau-workbench/`` under a key hashing the simulator's sources,
 the servo configuration and the log generator, so a change in any of them simulates again; the
 workbench itself always runs.
