@@ -68,7 +68,9 @@ def with_derivatives(ds: Dataset, windows: list[int], order: int | None = None) 
     cols = {"dq": _per_recording(ds, ds.signals["q"], windows, 1, order)}
     if "ddq_est" not in ds.signals:
         cols["ddq"] = _per_recording(ds, ds.signals["q"], windows, 2, order)
-    return replace(ds, signals=ds.signals.with_columns(**cols))
+    parts = [(a, w, dt) for (a, _, dt), w in zip(recording_windows(ds), windows, strict=True)]
+    dq = {**ds.preprocessing["dq"], "windows": parts, "order": 2 if order is None else order}
+    return replace(ds, signals=ds.signals.with_columns(**cols), preprocessing={**ds.preprocessing, "dq": dq})
 
 
 def _per_recording(ds: Dataset, x: np.ndarray, windows: list[int], deriv: int, order: int | None,
@@ -96,7 +98,8 @@ def smoothing_check(ds: Dataset) -> tuple[Dataset, str] | None:
     if min(windows) < 2 * SMOOTH_CHECK_ORDER + 3:
         return None
     tau = _per_recording(ds, ds.signals["tau_raw"], windows, 0, SMOOTH_CHECK_ORDER, key="tau")
-    return (replace(ds, signals=ds.signals.with_columns(tau=tau)),
+    prep = {**ds.preprocessing, "tau": {**info, "order": SMOOTH_CHECK_ORDER}}
+    return (replace(ds, signals=ds.signals.with_columns(tau=tau), preprocessing=prep),
             f"tau smoothed by a quartic fit over the same {info['window']} samples")
 
 

@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
 
 import numpy as np
@@ -77,7 +77,7 @@ from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
-from .resolution import probes_within_resolution, within_resolution
+from .resolution import error_floor, probes_within_resolution, removed_error, within_resolution
 from .verdict import (
     Candidate,
     Confusion,
@@ -302,8 +302,9 @@ def diagnose(
             partial=bool(explained is not None and explained < PARTIAL and probe - gain > 0.05),
         ))
     ranking, apart = lookalikes_apart(ranking, exc, min_gain, tuple(spec.effect_names))
-    ranking = _checked(ds, spec, _ranked(within_resolution(ds, ranking, e0, loss, min_gain), min_gain), loss, folds,
-                       min_gain)
+    coefs = base.model.coefficients  # the regressors' noise floors scale with k_tau and k_v
+    ranking = _checked(ds, spec, _ranked(within_resolution(ds, ranking, e0, loss, min_gain, coefs), min_gain), loss,
+                       folds, min_gain, coefs)
     top = ranking[0] if ranking and ranking[0].testable else None
     if top is not None and top.heldout_gain >= min_gain and top.consistent and top.family in probes:
         try:
@@ -317,7 +318,7 @@ def diagnose(
         except IdentificationError:
             pass
     probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
-    probes, floored = probes_within_resolution(ds, probes, e0, loss)
+    probes, floored = probes_within_resolution(ds, probes, e0, loss, coefs)
     checks += floored + apart
     constant = [c.effect for c in ranking if c.reason and CONSTANT_ERROR in c.reason]
     if constant:
@@ -379,9 +380,10 @@ def _ranked(candidates: list[Candidate], min_gain: float) -> list[Candidate]:
 
 
 def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss, folds: list[Fold],
-             min_gain: float) -> list[Candidate]:
+             min_gain: float, coefficients: Mapping[str, float]) -> list[Candidate]:
     """``ranking`` (sorted) where a lag-like effect (family ``dynamics``) that would come first and be named keeps
-    its place only if it still removes ``min_gain`` with every less biased derivative
+    its place only if it still removes ``min_gain``, and more than the log's noise floor
+    (:func:`~.resolution.error_floor` with the model's ``coefficients``), with every less biased derivative
     (:func:`~.checks.derivative_checks`), with a less biased torque smoothing (:func:`~.checks.smoothing_check`)
     and, on a servo-error log whose model has no constant offset, with one (a
     constant error, e.g. an encoder's zero or a dead zone under a load of one sign, biases ``k_tau``, and lag-like
@@ -405,12 +407,18 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
         if not alternatives:
             break
         eff = resolve_effects([top.effect])[0]
-        g, how, cause = min(((_gain_with(d, sp, eff, loss, folds), how, cause) for d, sp, how, cause in alternatives),
-                            key=lambda x: x[0])
-        if g >= min_gain:
+        failed = None
+        for d, sp, how, cause in alternatives:
+            g, removed = _gain_with(d, sp, eff, loss, folds)
+            floor = error_floor(d, loss, coefficients)
+            if g < min_gain or (0 < floor and removed <= floor):
+                failed = (g, removed, floor, how, cause) if failed is None or g < failed[0] else failed
+        if failed is None:
             break
+        g, removed, floor, how, cause = failed
+        within = f", {1e6 * removed:.3g} urad RMS within the noise floor {1e6 * floor:.3g}" if g >= min_gain else ""
         ranking[i] = replace(top, testable=False, reason=f"cannot tell: may be {cause} (held-out gain {100 * g:.0f} % "
-                                                         f"{how})")
+                                                         f"{how}{within})")
         ranking = _ranked(ranking, min_gain)
     return ranking
 
@@ -438,30 +446,33 @@ def _then(ds: Dataset, spec: ModelSpec, top: Candidate, ranking: list[Candidate]
         e1, gain, fold_gains, consistent = _heldout_gain(y, pred, e0, e0_folds, folds, loss)
         out.append(replace(c, heldout_gain=gain, heldout_error=e1, fold_gains=fold_gains, consistent=consistent,
                            explained=None, partial=False, remaining=None))
-    out = _ranked(within_resolution(ds, out, e0, loss, min_gain), min_gain)
-    out = _checked(ds, with_top, out, loss, folds, min_gain)
+    fitted = fit_spec(ds.signals, y, with_top, loss, cache=cache)
+    out = _ranked(within_resolution(ds, out, e0, loss, min_gain, fitted.coefficients), min_gain)
+    out = _checked(ds, with_top, out, loss, folds, min_gain, fitted.coefficients)
     best = next((c for c in out if nameable(c, min_gain)), None)
     if best is None:
         return None
     eff = resolve_effects([best.effect])[0]
     full, e_train = _full_fit(ds, with_top, eff, loss, cache)  # shape and coefficient over the model with top
-    train0 = error_of(y - fit_spec(ds.signals, y, with_top, loss, cache=cache).predict(ds.signals), y, loss)
+    train0 = error_of(y - fitted.predict(ds.signals), y, loss)
     shape = full.spec.terms[-1].shape
     return replace(best, shape=dict(shape), coefficient=full.coefficients[eff.name],
                    train_gain=1.0 - e_train / train0 if train0 > 0 else 0.0,
                    at_grid_edge=at_grid_edge(eff, shape, ds.signals))
 
 
-def _gain_with(ds: Dataset, spec: ModelSpec, eff: Effect, loss: Loss, folds: list[Fold]) -> float:
-    """Held-out gain of ``eff`` over ``spec`` on ``ds`` (the same blocks and nested shape choice)."""
+def _gain_with(ds: Dataset, spec: ModelSpec, eff: Effect, loss: Loss, folds: list[Fold]) -> tuple[float, float]:
+    """Held-out gain of ``eff`` over ``spec`` on ``ds`` (the same blocks and nested shape choice), and the error it
+    removes (:func:`~.resolution.removed_error`)."""
     cache: dict = {}
     bases = base_per_fold(ds, spec, loss, folds, cache)
     base_pred = heldout_prediction(bases, ds.n)
     e0 = error_of(ds.target - base_pred, ds.target, loss)
     pred, _ = _score_effect(ds, eff, bases, loss, cache)
     if np.isnan(pred).any() or not e0 > 0:
-        return 0.0
-    return 1.0 - error_of(ds.target - pred, ds.target, loss) / e0
+        return 0.0, 0.0
+    e1 = error_of(ds.target - pred, ds.target, loss)
+    return 1.0 - e1 / e0, removed_error(e0, e1)
 
 
 def _untestable(eff: Effect, reason: str) -> Candidate:

@@ -6,17 +6,26 @@ angle. Any term that sets apart holding from moving, or a function of the positi
 therefore names no effect whose removed error (RMS, ``sqrt(E_base^2 - E_with^2)``) stays within that floor
 (:func:`quantisation_floor`, :func:`within_resolution`; a probe's gain likewise, :func:`probes_within_resolution`):
 below the encoder's resolution, the log cannot tell a physical effect from the encoder's rounding.
+
+The regressors' noise sets two more floors: the fits read the noisy torque and velocity, so the residual carries
+``k_tau`` times the torque's noise left after smoothing (:func:`torque_noise_floor`) and ``k_v`` times the velocity's
+(:func:`velocity_noise_floor`). A term that is a noise-free function of other signals (the command's history, the
+acceleration, the position) can stand in for part of the torque or the velocity, and removes up to that much error
+held out without any physical effect (errors in the variables). The floors add in quadrature (:func:`error_floor`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
 
+from servotau.actuator.terms import K_TAU, K_V
+
 __all__ = ["encoder_resolution", "error_floor", "probes_within_resolution", "quantisation_floor", "removed_error",
-           "within_resolution"]
+           "torque_noise_floor", "velocity_noise_floor", "within_resolution"]
 
 LATTICE_SHARE = 0.95  # of the steps between distinct angles that must be whole multiples of the smallest one
 LATTICE_TOL = 1e-3  # [steps] how close to a whole multiple
@@ -46,19 +55,84 @@ def quantisation_floor(resolution: float) -> float:
     return float(resolution) / np.sqrt(12.0)
 
 
-def error_floor(ds, loss) -> float:
-    """The encoder's rounding error [rad RMS] where it is part of the target of the dataset ``ds`` (``q_des - q``,
-    with the least-squares ``loss``), else 0."""
-    if not ds.actuator or loss.kind != "least_squares":
+def _noise_gain(ds, key: str, deriv: int) -> float:
+    """The white-noise gain of the centred SG filter applied here to signal ``key`` (``dq``: derivative 1 of ``q``;
+    ``tau``: smoothing): the root of the sum of its squared weights (per second for a derivative), per recording
+    weighted by its samples; 1 for a signal that is the log's own."""
+    from servotau.signal.savgol import causal_coeffs
+
+    info = ds.preprocessing.get(key, {})
+    if info.get("source") not in ("smoothed", "derivative of q"):
+        return 1.0
+    parts = list(info.get("windows", ((0, info["window"], ds.dt),)))
+    ends = [a for a, _, _ in parts[1:]] + [ds.n]
+    order = info.get("order", 2)
+    total = 0.0
+    for (a, w, dt), b in zip(parts, ends, strict=True):
+        if w > order:
+            total += (b - a) * float(np.sum(causal_coeffs(w, order, deriv, dt, "centre") ** 2))
+        else:  # data.differentiate falls back to the central difference
+            total += (b - a) * (0.5 / dt ** 2 if deriv else 1.0)
+    return math.sqrt(total / ds.n)
+
+
+def torque_noise_floor(ds, k_tau: float) -> float:
+    """The torque's noise in the servo error [rad RMS]: ``|k_tau|`` times the white-noise level of the log's torque
+    (:func:`~servotau.actuator.excitation.noise_floor` of the raw column) times the noise gain of the smoothing
+    applied here. 0 without a torque."""
+    from servotau.actuator.excitation import noise_floor
+
+    if not ds.has_torque or not k_tau:
         return 0.0
-    return quantisation_floor(ds.preprocessing.get("q", {}).get("resolution", 0.0))
+    sigma = noise_floor(ds.signals["tau_raw"] if "tau_raw" in ds.signals else ds.signals["tau"])
+    return abs(k_tau) * sigma * _noise_gain(ds, "tau", 0)
 
 
-def within_resolution(ds, ranking: list, e0: float, loss, min_gain: float) -> list:
+def velocity_noise_floor(ds, k_v: float) -> float:
+    """The velocity's noise in the servo error [rad RMS]: ``|k_v|`` times the noise of ``dq``: for a derivative
+    taken here, the angle's noise (the encoder's rounding error, else the white-noise level of ``q``) times the
+    derivative filter's noise gain; for the log's own velocity, its white-noise level."""
+    from servotau.actuator.excitation import noise_floor
+
+    if not k_v or "dq" not in ds.signals:
+        return 0.0
+    if ds.preprocessing.get("dq", {}).get("source") != "derivative of q":
+        return abs(k_v) * noise_floor(ds.signals["dq"])
+    res = ds.preprocessing.get("q", {}).get("resolution", 0.0)
+    sigma_q = quantisation_floor(res) if res > 0 else noise_floor(ds.signals["q"])
+    return abs(k_v) * sigma_q * _noise_gain(ds, "dq", 1)
+
+
+def error_floor(ds, loss, coefficients: Mapping[str, float] | None = None) -> float:
+    """The error [rad RMS] no effect can be told within, for the dataset ``ds`` (``q_des - q``, least-squares
+    ``loss``; else 0): the encoder's rounding error, and the torque's and the velocity's noise through the base
+    model's ``coefficients`` (``k_tau``, ``k_v``), in quadrature (module doc)."""
+    return math.sqrt(sum(x ** 2 for x in _floors(ds, loss, coefficients).values()))
+
+
+def _floors(ds, loss, coefficients: Mapping[str, float] | None) -> dict[str, float]:
+    if not ds.actuator or loss.kind != "least_squares":
+        return {}
+    coefficients = coefficients or {}
+    return {"the encoder's rounding error": quantisation_floor(ds.preprocessing.get("q", {}).get("resolution", 0.0)),
+            "the torque's noise times k_tau": torque_noise_floor(ds, coefficients.get(K_TAU, 0.0)),
+            "the velocity's noise times k_v": velocity_noise_floor(ds, coefficients.get(K_V, 0.0))}
+
+
+def _floor_text(ds, loss, coefficients: Mapping[str, float] | None) -> str:
+    """The floor (:func:`error_floor`, not 0) and what it is made of, for the reasons."""
+    parts = [f"{k} {1e6 * v:.3g} urad RMS" for k, v in _floors(ds, loss, coefficients).items() if v > 0]
+    if len(parts) < 2:
+        return parts[0]
+    return f"{1e6 * error_floor(ds, loss, coefficients):.3g} urad RMS: {', '.join(parts)}, in quadrature"
+
+
+def within_resolution(ds, ranking: list, e0: float, loss, min_gain: float,
+                      coefficients: Mapping[str, float] | None = None) -> list:
     """``ranking`` (the diagnosis's candidates) with the effects that would be named but remove no more error than
-    the encoder's rounding made untestable, saying so (least squares only: the errors are RMS); ``e0`` the base
-    model's held-out error."""
-    floor = error_floor(ds, loss)
+    the floor (:func:`error_floor`) made untestable, saying so (least squares only: the errors are RMS); ``e0`` the
+    base model's held-out error, ``coefficients`` its coefficients."""
+    floor = error_floor(ds, loss, coefficients)
     if floor <= 0:
         return ranking
     out = []
@@ -66,8 +140,8 @@ def within_resolution(ds, ranking: list, e0: float, loss, min_gain: float) -> li
         removed = removed_error(e0, c.heldout_error)
         if c.testable and c.heldout_gain >= min_gain and removed <= floor:
             c = replace(c, testable=False, reason=(
-                f"cannot tell: removes {1e6 * removed:.3g} urad RMS, within the encoder's rounding error "
-                f"({1e6 * floor:.3g} urad RMS, resolution {ds.preprocessing['q']['resolution']:.3g} rad)"))
+                f"cannot tell: removes {1e6 * removed:.3g} urad RMS, within the log's noise floor "
+                f"({_floor_text(ds, loss, coefficients)})"))
         out.append(c)
     return out
 
@@ -77,10 +151,12 @@ def removed_error(e0: float, e1: float) -> float:
     return math.sqrt(max(e0 ** 2 - e1 ** 2, 0.0))
 
 
-def probes_within_resolution(ds, probes: dict[str, float], e0: float, loss) -> tuple[dict[str, float], tuple[str, ...]]:
-    """``probes`` with the gains that remove no more error than the encoder's rounding set to 0, and a sentence
-    for each (see :func:`within_resolution`)."""
-    floor = error_floor(ds, loss)
+def probes_within_resolution(ds, probes: dict[str, float], e0: float, loss,
+                             coefficients: Mapping[str, float] | None = None
+                             ) -> tuple[dict[str, float], tuple[str, ...]]:
+    """``probes`` with the gains that remove no more error than the floor set to 0, and a sentence for each (see
+    :func:`within_resolution`)."""
+    floor = error_floor(ds, loss, coefficients)
     if floor <= 0:
         return probes, ()
     out, notes = dict(probes), []
@@ -90,5 +166,5 @@ def probes_within_resolution(ds, probes: dict[str, float], e0: float, loss) -> t
             out[k] = 0.0
             if g >= 0.05:
                 notes.append(f"cannot tell: the {k} probe removes {1e6 * removed:.3g} urad RMS ({100 * g:.0f} %), "
-                             f"within the encoder's rounding error ({1e6 * floor:.3g} urad RMS)")
+                             f"within the log's noise floor ({_floor_text(ds, loss, coefficients)})")
     return out, tuple(notes)

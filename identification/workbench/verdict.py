@@ -25,6 +25,7 @@ from .data import Dataset
 from .evaluate import Comparison, error_of
 from .model import FittedModel, ModelSpec, design, fit_spec
 from .probes import MEMORY_HORIZON_S, base_per_fold, heldout_prediction, memory_candidates, probe_gains
+from .resolution import probes_within_resolution
 
 PROBE_FACTOR = 2.0
 """A probe (tens of free parameters) names ``unexplained`` structure from ``PROBE_FACTOR * min_gain`` on."""
@@ -316,7 +317,8 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
             pred = heldout_prediction(bases, fds.n)
             e0 = error_of(fds.target - pred, fds.target, loss)
             model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
-            again = probe_gains(fds, bases, model, loss, e0)
+            raw = probe_gains(fds, bases, model, loss, e0)
+            again, _ = probes_within_resolution(fds, raw, e0, loss, model.coefficients)
         except IdentificationError as exc:
             notes.append(f"the check of the {', '.join(todo)} probe with {how} failed: {exc}")
             continue
@@ -324,8 +326,10 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
             g = again.get(k, 0.0)
             if g < out[k]:
                 if g < PROBE_FACTOR * min_gain <= out[k]:
-                    notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % with "
-                                 f"{how}: it may be {cause}")
+                    falls = (f"{100 * raw[k]:.0f} %, within the log's noise floor," if g < raw.get(k, 0.0) else
+                             f"{100 * g:.0f} %")
+                    notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {falls} with {how}: it "
+                                 f"may be {cause}")
                 out[k] = g
     return out, tuple(notes)
 
