@@ -81,7 +81,8 @@ def test_the_velocity_noise_floor_is_k_v_times_the_rounding_through_the_derivati
         cols, q, _, _ = _slow_log(res=res)
         ds = load_dataset(cols)
         assert math.isclose(ds.preprocessing["q"]["resolution"], res, rel_tol=1e-6)
-        exact = load_dataset({**cols, "q": q}, dq_window=ds.preprocessing["dq"]["window"])
+        exact = load_dataset({**cols, "q": q}, dq_window=ds.preprocessing["dq"]["window"],
+                             dq_order=ds.preprocessing["dq"]["order"])
         added = float(np.std(ds.signals["dq"] - exact.signals["dq"]))
         assert 0.7 < velocity_noise_floor(ds, 1.0) / added < 1.3, res
     assert velocity_noise_floor(ds, 0.0) == 0.0

@@ -24,11 +24,11 @@ from .evaluate import error_of
 from .model import ModelSpec
 from .probes import base_per_fold, heldout_prediction
 
-__all__ = ["CHECK_ORDER", "constant_error", "derivative_checks", "faster_derivative", "preprocessing_checks",
-           "recording_windows", "smoothing_check", "with_derivatives"]
+__all__ = ["CHECK_ORDER_STEP", "constant_error", "derivative_checks", "faster_derivative", "preprocessing_checks",
+           "recording_orders", "recording_windows", "smoothing_check", "with_derivatives"]
 
-CHECK_ORDER = 4  # polynomial order of the cubic check: a first derivative's coefficients agree for orders 3 and 4
-# (dq is a cubic's); ddq is then a quartic's second derivative
+CHECK_ORDER_STEP = 2  # the higher-order check's polynomial order over the velocity's own: a centred first
+# derivative's coefficients agree for orders 2k - 1 and 2k (order 2 -> 4: a cubic's derivative; 4 -> 6: a quintic's)
 SMOOTH_CHECK_ORDER = 4  # polynomial order of the torque's check (smoothing_check)
 FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 over 3 samples: the central difference)
 
@@ -61,28 +61,36 @@ def recording_windows(ds: Dataset, key: str = "dq") -> list[tuple[int, int, floa
     return list(info.get("windows", ((0, info["window"], ds.dt),)))
 
 
-def with_derivatives(ds: Dataset, windows: list[int], order: int | None = None) -> Dataset:
+def recording_orders(ds: Dataset, key: str = "dq") -> list[int]:
+    """The polynomial order of each recording's filter of ``key`` (as :func:`recording_windows`; 2 when unsaid)."""
+    info = ds.preprocessing[key]
+    return list(info.get("orders", (info.get("order", 2),) * len(recording_windows(ds, key))))
+
+
+def with_derivatives(ds: Dataset, windows: list[int], orders: list[int] | None = None) -> Dataset:
     """``ds`` with ``dq`` (and ``ddq``, unless the log has its own) differentiated again from ``q``, each recording
-    on its own runs and period with its window of ``windows`` (``ddq`` over twice it), of polynomial ``order``
-    (default as :func:`differentiate`)."""
-    cols = {"dq": _per_recording(ds, ds.signals["q"], windows, 1, order)}
+    on its own runs and period with its window of ``windows`` (``ddq`` over twice it) and polynomial order of
+    ``orders`` (default its own, :func:`recording_orders`; ``ddq`` at least 3); the preprocessing says so."""
+    orders = recording_orders(ds) if orders is None else orders
+    cols = {"dq": _per_recording(ds, ds.signals["q"], windows, 1, orders)}
     if "ddq_est" not in ds.signals:
-        cols["ddq"] = _per_recording(ds, ds.signals["q"], windows, 2, order)
+        cols["ddq"] = _per_recording(ds, ds.signals["q"], windows, 2, [max(o, 3) for o in orders])
     parts = [(a, w, dt) for (a, _, dt), w in zip(recording_windows(ds), windows, strict=True)]
-    dq = {**ds.preprocessing["dq"], "windows": parts, "order": 2 if order is None else order}
+    dq = {**ds.preprocessing["dq"], "windows": parts, "orders": tuple(orders)}
     return replace(ds, signals=ds.signals.with_columns(**cols), preprocessing={**ds.preprocessing, "dq": dq})
 
 
-def _per_recording(ds: Dataset, x: np.ndarray, windows: list[int], deriv: int, order: int | None,
+def _per_recording(ds: Dataset, x: np.ndarray, windows: list[int], deriv: int, orders: list[int],
                    key: str = "dq") -> np.ndarray:
     """The ``deriv``-th derivative of ``x`` (0: smoothed), each recording of ``ds`` (as filtered for ``key``) on its
-    own runs and period with its window of ``windows`` (twice it, less one, for ``deriv`` 2)."""
+    own runs and period with its window of ``windows`` (twice it, less one, for ``deriv`` 2) and order of
+    ``orders``."""
     parts = recording_windows(ds, key)
     runs = ds.signals.runs()
     ends = [a for a, _, _ in parts[1:]] + [ds.n]
     return np.concatenate([differentiate(x[a:b], [(r - a, e - a) for r, e in runs if a <= r < b], dt, deriv,
-                                         w if deriv < 2 else 2 * w - 1, order=order)
-                           for (a, _, dt), b, w in zip(parts, ends, windows, strict=True)])
+                                         w if deriv < 2 else 2 * w - 1, order=o)
+                           for (a, _, dt), b, w, o in zip(parts, ends, windows, orders, strict=True)])
 
 
 def smoothing_check(ds: Dataset) -> tuple[Dataset, str] | None:
@@ -97,17 +105,19 @@ def smoothing_check(ds: Dataset) -> tuple[Dataset, str] | None:
     windows = [w for _, w, _ in recording_windows(ds, "tau")]
     if min(windows) < 2 * SMOOTH_CHECK_ORDER + 3:
         return None
-    tau = _per_recording(ds, ds.signals["tau_raw"], windows, 0, SMOOTH_CHECK_ORDER, key="tau")
-    prep = {**ds.preprocessing, "tau": {**info, "order": SMOOTH_CHECK_ORDER}}
+    orders = (SMOOTH_CHECK_ORDER,) * len(windows)
+    tau = _per_recording(ds, ds.signals["tau_raw"], windows, 0, orders, key="tau")
+    prep = {**ds.preprocessing, "tau": {**info, "order": SMOOTH_CHECK_ORDER, "orders": orders}}
     return (replace(ds, signals=ds.signals.with_columns(tau=tau), preprocessing=prep),
             f"tau smoothed by a quartic fit over the same {info['window']} samples")
 
 
 def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:
     """``ds`` with ``dq`` (and ``ddq``) differentiated less biased than the workbench's own, each with a phrase
-    saying how: over half the window (:func:`faster_derivative`), and by a cubic fit over the same window (the
-    centred order-2 derivative's error grows with the third derivative of ``q``, the cubic's with the fifth: at
-    coarse sample periods, where even 3 samples span the servo's transients, a shorter window is not enough).
+    saying how: over half the window (:func:`faster_derivative`), and by a polynomial ``CHECK_ORDER_STEP`` orders
+    higher over the same window (the centred order-2 derivative's error grows with the third derivative of ``q``,
+    the cubic's with the fifth: at coarse sample periods, where even 3 samples span the servo's transients, a
+    shorter window is not enough).
     Empty when the velocity is the log's own. The checks of :func:`~.diagnose.diagnose` that a lag-like effect
     or a probe is not the differentiation's own error."""
     if not _differentiated_here(ds):
@@ -118,8 +128,11 @@ def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:
     if fast is not None:
         out.append((fast[0], f"dq over {fast[1]} samples instead of {w0}"))
     windows = [w for _, w, _ in recording_windows(ds)]
-    if min(windows) > CHECK_ORDER:  # a shorter window leaves the polynomial no freedom: finite differences again
-        out.append((with_derivatives(ds, windows, order=CHECK_ORDER), f"dq by a cubic fit over the same {w0} samples"))
+    higher = [o + CHECK_ORDER_STEP for o in recording_orders(ds)]
+    # a window of no more samples leaves the polynomial no freedom: finite differences again
+    if all(w > o for w, o in zip(windows, higher, strict=True)):
+        fit = "a cubic" if set(higher) == {4} else "a quintic" if set(higher) == {6} else "a higher-order"
+        out.append((with_derivatives(ds, windows, higher), f"dq by {fit} fit over the same {w0} samples"))
     return out
 
 

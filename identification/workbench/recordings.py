@@ -100,6 +100,7 @@ def _preprocessing(datasets: Sequence[Dataset], offsets, notes: list[str]) -> di
         windows = [int(i["window"]) for i in infos]
         out[key]["windows"] = tuple((int(o), w, float(d.dt)) for o, w, d in zip(offsets, windows, datasets,
                                                                                  strict=True))
+        out[key]["orders"] = tuple(int(i.get("order", 2)) for i in infos)
         if len(set(windows)) > 1:
             out[key]["window"] = windows_text(windows)
             notes.append(f"{key}: each recording filtered with its own window: {windows_text(windows)} samples "

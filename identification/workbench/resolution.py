@@ -66,9 +66,9 @@ def _noise_gain(ds, key: str, deriv: int) -> float:
         return 1.0
     parts = list(info.get("windows", ((0, info["window"], ds.dt),)))
     ends = [a for a, _, _ in parts[1:]] + [ds.n]
-    order = info.get("order", 2)
+    orders = info.get("orders", (info.get("order", 2),) * len(parts))
     total = 0.0
-    for (a, w, dt), b in zip(parts, ends, strict=True):
+    for (a, w, dt), b, order in zip(parts, ends, orders, strict=True):
         if w > order:
             total += (b - a) * float(np.sum(causal_coeffs(w, order, deriv, dt, "centre") ** 2))
         else:  # data.differentiate falls back to the central difference
