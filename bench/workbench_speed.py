@@ -8,7 +8,7 @@ load) and the wall and CPU seconds of each stage (``stages``, ``stages_cpu``; ex
 the stages it calls):
 
 - ``load``: reading the columns and differentiating (``load_dataset`` without the window choice);
-- ``window``: the SG windows chosen by cross-validation (``cv_window``);
+- ``window``: the SG windows and orders chosen by cross-validation (``cv_window``, ``cv_derivative``);
 - ``base``: the current model's shapes, its fit and its held-out prediction (``compare``, ``base_per_fold``);
 - ``grid``: every effect's held-out score, each shape of its grid fitted on each fold's training blocks;
 - ``full``: every effect's shape and coefficient on all samples;
@@ -34,7 +34,7 @@ from servotau.identification.workbench import diagnose, effect_names, load_datas
 TARGET_S = 10.0
 STAGES = {  # module -> {function: stage}; functions a version of the code lacks are skipped; "x?": x if called
     # directly by diagnose, else part of the caller's stage
-    "servotau.identification.workbench.data": {"cv_window": "window"},
+    "servotau.identification.workbench.data": {"cv_window": "window", "cv_derivative": "window"},
     "servotau.identification.workbench.diagnose": {
         "compare": "base", "base_per_fold": "base", "resolve_shapes": "base?", "_score_effect": "grid",
         "_full_fit": "full", "_checked": "check", "_gain_with": "check", "probe_gains": "probes", "_then": "next",

@@ -4,50 +4,20 @@ velocity, and no lag-like false alarm on a clean log of a stiff plant (servotau/
 from __future__ import annotations
 
 import numpy as np
+from support.synthetic import two_sine_log
 
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
-from servotau.identification.workbench.data import cv_window
-
-
-def _runs(n):
-    return [(0, n)]
-
-
-def _log(dt, noise, seed=0, duration=4.0, with_dq=False):
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, duration, dt)
-    q = 0.3 * np.sin(2 * np.pi * 1.5 * t) + 0.1 * np.sin(2 * np.pi * 0.4 * t)
-    dq = 0.3 * 2 * np.pi * 1.5 * np.cos(2 * np.pi * 1.5 * t) + 0.1 * 2 * np.pi * 0.4 * np.cos(2 * np.pi * 0.4 * t)
-    tau = 5 * q + rng.normal(0, 0.05, len(t))
-    cols = {"t": t, "q": q + rng.normal(0, noise, len(t)), "q_des": q + tau / 1000, "tau": tau}
-    if with_dq:
-        cols["dq"] = dq
-    return cols
-
-
-def test_cv_window_shorter_when_faster_sampled_on_a_smooth_signal():
-    # the same smooth signal with the same little noise: the faster-sampled log gets a shorter window in time
-    fast, slow = _log(1e-3, 2e-6), _log(8e-3, 2e-6, duration=32.0)
-    w_fast = cv_window(fast["q"], _runs(len(fast["q"])))
-    w_slow = cv_window(slow["q"], _runs(len(slow["q"])))
-    assert w_fast * 1e-3 < w_slow * 8e-3
-    assert w_fast * 1e-3 < 0.041  # shorter than the former fixed window
-
-
-def test_cv_window_longer_on_a_noisier_signal():
-    quiet, noisy = _log(1e-3, 1e-6), _log(1e-3, 1e-3)
-    assert cv_window(noisy["q"], _runs(len(noisy["q"]))) > cv_window(quiet["q"], _runs(len(quiet["q"])))
 
 
 def test_log_velocity_used_when_present_and_said():
-    cols = _log(1e-3, 1e-5, with_dq=True)
+    cols = two_sine_log(1e-3, 1e-5, with_dq=True)
     ds = load_dataset(cols)
     assert np.array_equal(ds.signals["dq"], cols["dq"])
     assert any("log's own velocity column 'dq'" in n for n in ds.notes)
 
 
 def test_notes_give_windows_in_samples_and_seconds():
-    ds = load_dataset(_log(2e-3, 1e-5))
+    ds = load_dataset(two_sine_log(2e-3, 1e-5))
     dq_note = next(n for n in ds.notes if n.startswith("dq:"))
     tau_note = next(n for n in ds.notes if n.startswith("tau:"))
     assert "samples =" in dq_note and "ms" in dq_note and "cross-validation" in dq_note
@@ -55,7 +25,7 @@ def test_notes_give_windows_in_samples_and_seconds():
 
 
 def test_time_jumps_are_noted():
-    cols = _log(1e-3, 1e-5)
+    cols = two_sine_log(1e-3, 1e-5)
     cols["t"] = cols["t"].copy()
     cols["t"][2000:] += 0.05
     ds = load_dataset(cols)
@@ -123,8 +93,8 @@ def test_the_chosen_derivative_order_follows_the_motion_better():
         dq = true["dq"][:: int(round(plant.period / pf.RECORD))]
         ds, ds2 = load_dataset(log), load_dataset(log, dq_order=2)
         assert ds.preprocessing["dq"]["order"] == 4 and ds2.preprocessing["dq"]["order"] == 2
-        err = lambda d: np.sqrt(np.mean((d.signals["dq"] - dq)[20:-20] ** 2))  # noqa: E731
-        assert err(ds) < 0.5 * err(ds2), seed
+        err = [np.sqrt(np.mean((d.signals["dq"] - dq)[20:-20] ** 2)) for d in (ds, ds2)]
+        assert err[0] < 0.5 * err[1], seed
     _plant, _ds, d = _plant_diagnosis(0, ())
     assert d.verdict == "no_missing_effect"
     assert next(c for c in d.ranking if c.effect == "delay").heldout_gain < 0.05
@@ -136,7 +106,7 @@ def test_true_delay_survives_the_less_biased_derivatives():
 
 
 def test_log_velocity_skips_the_faster_derivative_check():
-    cols = _log(1e-3, 1e-5, with_dq=True)
+    cols = two_sine_log(1e-3, 1e-5, with_dq=True)
     ds = load_dataset(cols)
     assert ds.preprocessing["dq"] == {"source": "log", "column": "dq"}
     from servotau.identification.workbench.checks import faster_derivative
@@ -149,7 +119,7 @@ def test_faster_derivative_runs_when_the_window_is_already_five_samples():
     difference (3 samples) instead of not running."""
     from servotau.identification.workbench.checks import faster_derivative
 
-    ds = load_dataset(_log(10e-3, 1e-5, duration=40.0), dq_window=5)
+    ds = load_dataset(two_sine_log(10e-3, 1e-5, duration=40.0), dq_window=5)
     fast = faster_derivative(ds)
     assert fast is not None and fast[1] == 3
     q, dt = ds.signals["q"], ds.dt

@@ -19,8 +19,9 @@ from servotau.actuator import Loss
 from servotau.actuator.terms import OFFSET
 
 from ..data.folds import Fold
-from .data import Dataset, differentiate, windows_text
+from .data import Dataset, windows_text
 from .evaluate import error_of
+from .filters import differentiate
 from .model import ModelSpec
 from .probes import base_per_fold, heldout_prediction
 

@@ -71,7 +71,7 @@ def _noise_gain(ds, key: str, deriv: int) -> float:
     for (a, w, dt), b, order in zip(parts, ends, orders, strict=True):
         if w > order:
             total += (b - a) * float(np.sum(causal_coeffs(w, order, deriv, dt, "centre") ** 2))
-        else:  # data.differentiate falls back to the central difference
+        else:  # filters.differentiate falls back to the central difference
             total += (b - a) * (0.5 / dt ** 2 if deriv else 1.0)
     return math.sqrt(total / ds.n)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["K_C", "K_TAU", "K_V", "cogging_truth", "friction_recording", "synthetic_table"]
+__all__ = ["K_C", "K_TAU", "K_V", "cogging_truth", "friction_recording", "synthetic_table", "two_sine_log"]
 
 K_TAU, K_V, K_C = 5e-5, 6e-3, 1.3e-4  # [rad/(N m)], [rad/(rad/s)], [rad]
 
@@ -46,3 +46,17 @@ def friction_recording(i: int, *, seconds: float, f0: float) -> dict[str, np.nda
     v = 0.4 * np.sin(2 * np.pi * (f0 + 0.05 * i) * t) + 0.2 * np.sin(2 * np.pi * 0.9 * t + i)
     f = 0.2 + 1.5 * np.tanh(v / 0.01) + 3.0 * v + 0.02 * rng.standard_normal(t.size)
     return {"t": t, "v": v, "friction": f}
+
+
+def two_sine_log(dt, noise, seed=0, duration=4.0, with_dq=False) -> dict[str, np.ndarray]:
+    """A log ``t, q, q_des, tau`` (optional ``dq``) of two sines (1.5 and 0.4 Hz) sampled every ``dt`` [s], ``q`` with
+    white noise of ``noise`` [rad], the torque 5 q plus white noise of 0.05 N m, a servo error of tau / 1000."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration, dt)
+    q = 0.3 * np.sin(2 * np.pi * 1.5 * t) + 0.1 * np.sin(2 * np.pi * 0.4 * t)
+    dq = 0.3 * 2 * np.pi * 1.5 * np.cos(2 * np.pi * 1.5 * t) + 0.1 * 2 * np.pi * 0.4 * np.cos(2 * np.pi * 0.4 * t)
+    tau = 5 * q + rng.normal(0, 0.05, len(t))
+    cols = {"t": t, "q": q + rng.normal(0, noise, len(t)), "q_des": q + tau / 1000, "tau": tau}
+    if with_dq:
+        cols["dq"] = dq
+    return cols
