@@ -326,10 +326,12 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
             g = again.get(k, 0.0)
             if g < out[k]:
                 if g < PROBE_FACTOR * min_gain <= out[k]:
-                    falls = (f"{100 * raw[k]:.0f} %, within the log's noise floor," if g < raw.get(k, 0.0) else
-                             f"{100 * g:.0f} %")
-                    notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {falls} with {how}: it "
-                                 f"may be {cause}")
+                    if g < raw.get(k, 0.0):  # floored: what it removes there is within that log's noise floor
+                        notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % is {100 * raw[k]:.0f} % with "
+                                     f"{how}, within the log's noise floor there: it may be {cause}")
+                    else:
+                        notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % "
+                                     f"with {how}: it may be {cause}")
                 out[k] = g
     return out, tuple(notes)
 
