@@ -79,13 +79,13 @@ def test_the_faster_derivative_check_runs_on_a_joined_log():
 
 
 def test_the_chosen_derivative_order_follows_the_motion_better():
-    """Clean logs of the independent plant family at 1-11 ms: the quartic's smoother predicts the held-out encoder
-    samples better than the order-2 one, so the quartic is chosen, and its velocity is closer to the plant's true
-    velocity than the order-2 derivative over its own chosen window; `delay`, which stood in for the order-2
-    derivative's error on seed 0, is no candidate."""
+    """Clean logs of the independent plant family at 1-4 ms: the quartic's smoother predicts the held-out encoder
+    samples better than the order-2 one by more than a standard error, so the quartic is chosen, and its velocity is
+    closer to the plant's true velocity than the order-2 derivative over its own chosen window; `delay`, which stood
+    in for the order-2 derivative's error on seed 0, is no candidate."""
     from servotau.experiments import plant_family as pf
 
-    for seed, period in ((0, 1e-3), (2542, None), (2634, None)):
+    for seed, period in ((0, 1e-3), (2401, None), (2634, None)):
         plant = pf.draw_plant(seed, hidden=()) if period is None else pf.draw_plant(seed, hidden=(), period=period,
                                                                                      duration=8.0)
         (true,) = pf.simulate([plant], 8.0)
