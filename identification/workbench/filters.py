@@ -46,20 +46,20 @@ def cv_derivative(x: np.ndarray, runs: list[tuple[int, int]], orders: tuple[int,
     with the third derivative of ``x``, the quartic's with the fifth) and takes a longer window against the noise:
     the held-out error weighs the two. On most of the plant family's clean logs (1-16 ms) the quartic wins and errs
     3-4 times less than the order-2 derivative against the true velocity."""
-    best = None
+    best = None  # (window used, order, window of the best held-out error)
     for order in orders:
-        window, err = _cv(x, runs, order, MIN_WINDOW, MAX_WINDOW)
+        window, err, best_window = _cv(x, runs, order, MIN_WINDOW, MAX_WINDOW)
         if not np.isfinite(err):
             continue
-        if best is None or _better(x, runs, best, (window, order)):
-            best = (window, order)
-    return best if best is not None else (cv_window(x, runs, orders[0]), orders[0])
+        if best is None or _better(x, runs, (best[2], best[1]), (best_window, order)):
+            best = (window, order, best_window)
+    return best[:2] if best is not None else (cv_window(x, runs, orders[0]), orders[0])
 
 
 def _better(x: np.ndarray, runs: list[tuple[int, int]], old: tuple[int, int], new: tuple[int, int]) -> bool:
-    """Whether the leave-one-out smoother ``new`` (window, order) beats ``old`` on ``x`` by more than one standard
-    error of the mean difference of their squared residuals (same samples: the interiors of the runs for the longer
-    window; ``SE_BLOCKS`` contiguous blocks)."""
+    """Whether the leave-one-out smoother ``new`` (window, order; each order at its best window) beats ``old`` on
+    ``x`` by more than one standard error of the mean difference of their squared residuals (same samples: the
+    interiors of the runs for the longer window; ``SE_BLOCKS`` contiguous blocks)."""
     hi = max(old[0], new[0])
     diff = np.concatenate([_loo_residuals(x[a:b], *old, hi) ** 2 - _loo_residuals(x[a:b], *new, hi) ** 2
                            for a, b in runs if b - a > hi])
@@ -77,15 +77,16 @@ def _loo_residuals(seg: np.ndarray, window: int, order: int, hi: int) -> np.ndar
 
 
 def _cv(x: np.ndarray, runs: list[tuple[int, int]], order: int, min_window: int, max_window: int
-        ) -> tuple[int, float]:
-    """:func:`cv_window`'s window and its held-out error (the best error; inf when no run is long enough)."""
+        ) -> tuple[int, float, int]:
+    """:func:`cv_window`'s window, the best held-out error and the window that gives it (inf when no run is long
+    enough)."""
     x = np.asarray(x, dtype=float)
     longest = max((b - a for a, b in runs), default=0)
     hi = min(max_window, longest // 10)
     hi = hi if hi % 2 else hi - 1
     lo = max(min_window, order + 3 if (order + 3) % 2 else order + 4)
     if hi <= lo:
-        return lo, np.inf
+        return lo, np.inf, lo
     cands = sorted({int(round(w)) | 1 for w in np.geomspace(lo, hi, 16)})
     errs = []
     for w in cands:
@@ -103,10 +104,10 @@ def _cv(x: np.ndarray, runs: list[tuple[int, int]], order: int, min_window: int,
         errs.append(sq / n if n else np.inf)
     errs = np.asarray(errs)
     if not np.isfinite(errs).any():
-        return lo, np.inf
+        return lo, np.inf, lo
     best = float(np.min(errs))
     ok = [w for w, e in zip(cands, errs, strict=True) if e <= 1.02 * best]
-    return max(ok), best
+    return max(ok), best, cands[int(np.argmin(errs))]
 
 
 def differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: int, window: int,
