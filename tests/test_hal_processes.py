@@ -171,8 +171,10 @@ def test_fuzzed_commands_are_never_applied(tmp_path):
 
 @pytest.mark.parametrize("clock", ["realtime"])
 def test_realtime_clock_runs_on_wall_time(tmp_path, clock):
-    """Real-time mode: one tick per millisecond of wall time (the typical tick; a tick made late by a loaded
-    machine is not caught up), never faster than wall time, newest command applied."""
+    """Real-time mode: paced at one tick per millisecond of wall time, never faster than wall time, newest command
+    applied. A tick made late by a loaded machine is not caught up: on a loaded machine late ticks lengthen some
+    intervals (a median of 1.8 ms seen with four busy processes on 2 cores), so the pacing shows in the ticks that
+    were on time, the shortest tenth of the intervals; the tick count says it never runs faster."""
     port, log = free_port(), tmp_path / "server.parquet"
     with robot_server(tmp_path, port, clock=clock, log=log) as server:
         with ZenohBackend("fake", connect=[endpoint(port)]) as b:
@@ -187,4 +189,4 @@ def test_realtime_clock_runs_on_wall_time(tmp_path, clock):
     assert abs(f.q[0] - (f0.q[0] + 0.05)) < 0.01 and st["clock"] == "realtime" and st["state"] == "RUNNING"
     assert (f.seq - f0.seq) * 1e-3 < 1.2 * elapsed  # never faster than wall time
     wall = LogReader(log).columns["hal/wall_time"]
-    assert np.median(np.diff(wall)) == pytest.approx(1e-3, rel=0.1)  # paced at the period
+    assert np.quantile(np.diff(wall), 0.1) == pytest.approx(1e-3, rel=0.1)  # paced at the period
