@@ -89,19 +89,11 @@ def _cv(x: np.ndarray, runs: list[tuple[int, int]], order: int, min_window: int,
         return lo, np.inf, lo
     cands = sorted({int(round(w)) | 1 for w in np.geomspace(lo, hi, 16)})
     errs = []
+    segs = [x[a:b] for a, b in runs if b - a >= hi and np.all(np.isfinite(x[a:b]))]
     for w in cands:
-        c = _loo_coeffs(w, order)
-        sq, n = 0.0, 0
-        for a, b in runs:
-            seg = x[a:b]
-            if len(seg) < hi or not np.all(np.isfinite(seg)):
-                continue
-            pred = np.convolve(seg, c[::-1], mode="valid")
-            h0 = (hi - w) // 2  # the same interior for every window
-            r = seg[hi // 2: len(seg) - hi // 2] - pred[h0: len(pred) - h0]
-            sq += float(r @ r)
-            n += len(r)
-        errs.append(sq / n if n else np.inf)
+        r = [_loo_residuals(seg, w, order, hi) for seg in segs]  # the same interior for every window
+        n = sum(len(ri) for ri in r)
+        errs.append(sum(float(ri @ ri) for ri in r) / n if n else np.inf)
     errs = np.asarray(errs)
     if not np.isfinite(errs).any():
         return lo, np.inf, lo

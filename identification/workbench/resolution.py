@@ -121,10 +121,12 @@ def _floors(ds, loss, coefficients: Mapping[str, float] | None) -> dict[str, flo
 
 def _floor_text(ds, loss, coefficients: Mapping[str, float] | None) -> str:
     """The floor (:func:`error_floor`, not 0) and what it is made of, for the reasons."""
-    parts = [f"{k} {1e6 * v:.3g} urad RMS" for k, v in _floors(ds, loss, coefficients).items() if v > 0]
+    floors = _floors(ds, loss, coefficients)
+    parts = [f"{k} {1e6 * v:.3g} urad RMS" for k, v in floors.items() if v > 0]
     if len(parts) < 2:
         return parts[0]
-    return f"{1e6 * error_floor(ds, loss, coefficients):.3g} urad RMS: {', '.join(parts)}, in quadrature"
+    total = math.sqrt(sum(v ** 2 for v in floors.values()))
+    return f"{1e6 * total:.3g} urad RMS: {', '.join(parts)}, in quadrature"
 
 
 def within_resolution(ds, ranking: list, e0: float, loss, min_gain: float,
