@@ -25,12 +25,15 @@ from .filters import differentiate
 from .model import ModelSpec
 from .probes import base_per_fold, heldout_prediction
 
-__all__ = ["CHECK_ORDER_STEP", "constant_error", "derivative_checks", "faster_derivative", "preprocessing_checks",
-           "recording_orders", "recording_windows", "smoothing_check", "with_derivatives"]
+__all__ = ["CHECK_ORDER_STEP", "DIFFERENTIATION", "SMOOTHING", "constant_error", "derivative_checks",
+           "faster_derivative", "preprocessing_checks", "recording_orders", "recording_windows", "smoothing_check",
+           "with_derivatives"]
 
 CHECK_ORDER_STEP = 2  # the higher-order check's polynomial order over the velocity's own: a centred first
 # derivative's coefficients agree for orders 2k - 1 and 2k (order 2 -> 4: a cubic's derivative; 4 -> 6: a quintic's)
 SMOOTH_CHECK_ORDER = 4  # polynomial order of the torque's check (smoothing_check)
+DIFFERENTIATION = "the differentiation's error"  # the cause a derivative check gives
+SMOOTHING = "the torque smoothing's error"  # the cause the smoothing check gives
 FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 over 3 samples: the central difference)
 
 
@@ -159,8 +162,8 @@ def preprocessing_checks(ds: Dataset) -> list[tuple[Dataset, str, str]]:
     """Every check of the workbench's preprocessing, as ``(dataset, how, cause)``: :func:`derivative_checks` (the
     differentiation's error) and :func:`smoothing_check` (the torque smoothing's error). Empty when the velocity and
     the torque are the log's own."""
-    out = [(d, how, "the differentiation's error") for d, how in derivative_checks(ds)]
+    out = [(d, how, DIFFERENTIATION) for d, how in derivative_checks(ds)]
     smoothed = smoothing_check(ds)
     if smoothed is not None:
-        out.append((*smoothed, "the torque smoothing's error"))
+        out.append((*smoothed, SMOOTHING))
     return out

@@ -34,6 +34,9 @@ over half the window, and a cubic fit over the same window); if its held-out gai
 ``min_gain`` it is not named but reported untestable, "cannot tell: may be the differentiation's error", and the
 next effect is considered; likewise with the torque smoothed by a quartic fit (:func:`~.checks.smoothing_check`:
 a long order-2 smoothing of a noisy torque errs where the torque bends, "may be the torque smoothing's error").
+A function of the velocity (family ``velocity``: Coulomb, Stribeck, power-law viscous, Dahl, LuGre friction,
+stiction) is re-scored with the less biased velocities too: it can fit the derivative's amplitude error where the
+motion bends (``CHECKED``).
 On a servo-error log whose model has no constant offset, such an effect is also re-scored with one: a constant
 error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``, and lag-like terms fit the bias
 ("cannot tell: may be a constant error"; the message says to rerun with the offset). Whatever the verdict, the
@@ -71,7 +74,7 @@ from servotau.actuator.terms import K_TAU, OFFSET
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
-from .checks import constant_error, preprocessing_checks
+from .checks import DIFFERENTIATION, SMOOTHING, constant_error, preprocessing_checks
 from .data import Dataset
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
@@ -105,6 +108,12 @@ REMAINING = 0.05
 (when it is also at least a quarter of the effect's own gain)."""
 
 CONSTANT_ERROR = "a constant error"  # the cause the offset check gives (the message's --offset advice looks for it)
+
+CHECKED = {"dynamics": (DIFFERENTIATION, SMOOTHING, CONSTANT_ERROR), "velocity": (DIFFERENTIATION,)}
+"""The checks an effect of each family must survive to be named (:func:`_checked`). Lag-like effects fit the
+derivative's and the smoothing's lag and a constant error; functions of the velocity (friction) fit the derivative's
+amplitude error where the motion bends (an order-2 derivative's window spans the servo's transients at coarse
+sample periods)."""
 
 _LS = Loss.least_squares()
 
@@ -387,21 +396,23 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
     (:func:`~.checks.derivative_checks`), with a less biased torque smoothing (:func:`~.checks.smoothing_check`)
     and, on a servo-error log whose model has no constant offset, with one (a
     constant error, e.g. an encoder's zero or a dead zone under a load of one sign, biases ``k_tau``, and lag-like
-    terms fit the bias). Otherwise it is untestable, saying why, and the next one is considered. Friction-like
-    effects are not checked against the offset: a dead zone under a load of mostly one sign, or an asymmetric
-    Coulomb friction on a joint that rarely rests, is partly a constant and still physical."""
+    terms fit the bias). A function of the velocity (family ``velocity``) is checked with the less biased
+    derivatives only (``CHECKED``). Otherwise it is untestable, saying why, and the next one is considered.
+    Friction-like effects are not checked against the offset: a dead zone under a load of mostly one sign, or an
+    asymmetric Coulomb friction on a joint that rarely rests, is partly a constant and still physical."""
     preprocessed = None  # the log with less biased preprocessing (checks.preprocessing_checks), built on first need
     offset = None
     if ds.actuator and OFFSET not in spec.linear:
         offset = replace(spec, linear=(*spec.linear, OFFSET))
     while True:
         i = next((k for k, c in enumerate(ranking) if nameable(c, min_gain)), None)
-        if i is None or ranking[i].family != "dynamics":
+        causes = CHECKED.get(ranking[i].family, ()) if i is not None else ()
+        if not causes:
             break
         top = ranking[i]
         preprocessed = preprocessing_checks(ds) if preprocessed is None else preprocessed
-        alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in preprocessed]
-        if offset is not None:
+        alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in preprocessed if cause in causes]
+        if offset is not None and CONSTANT_ERROR in causes:
             alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)",
                                  CONSTANT_ERROR))
         if not alternatives:
