@@ -171,10 +171,11 @@ def test_fuzzed_commands_are_never_applied(tmp_path):
 
 @pytest.mark.parametrize("clock", ["realtime"])
 def test_realtime_clock_runs_on_wall_time(tmp_path, clock):
-    """Real-time mode: paced at one tick per millisecond of wall time, never faster than wall time, newest command
-    applied. A tick made late by a loaded machine is not caught up: on a loaded machine late ticks lengthen some
-    intervals (a median of 1.8 ms seen with four busy processes on 2 cores), so the pacing shows in the ticks that
-    were on time, the shortest tenth of the intervals; the tick count says it never runs faster."""
+    """Real-time mode: ticks on a schedule of one per millisecond of wall time, never ahead of it, newest command
+    applied. The loop sleeps until each tick's deadline; a tick late by less than a period keeps the schedule (the
+    next interval is shorter), one later than that restarts it from now (no burst). So between any two ticks j < k
+    at least (k - j - 1) periods of wall time pass, whatever the machine's load; how many ticks are late depends on
+    the load and is not asserted (a shortest-tenth interval of 0.76 ms was seen on a loaded CI machine)."""
     port, log = free_port(), tmp_path / "server.parquet"
     with robot_server(tmp_path, port, clock=clock, log=log) as server:
         with ZenohBackend("fake", connect=[endpoint(port)]) as b:
@@ -189,4 +190,5 @@ def test_realtime_clock_runs_on_wall_time(tmp_path, clock):
     assert abs(f.q[0] - (f0.q[0] + 0.05)) < 0.01 and st["clock"] == "realtime" and st["state"] == "RUNNING"
     assert (f.seq - f0.seq) * 1e-3 < 1.2 * elapsed  # never faster than wall time
     wall = LogReader(log).columns["hal/wall_time"]
-    assert np.quantile(np.diff(wall), 0.1) == pytest.approx(1e-3, rel=0.1)  # paced at the period
+    ahead = wall - 1e-3 * np.arange(wall.size)  # wall time of tick k less k periods [s]: never falls a period
+    assert wall.size > 10 and np.all(ahead >= np.maximum.accumulate(ahead) - 1e-3 - 1e-6)
