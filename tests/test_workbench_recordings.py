@@ -114,6 +114,11 @@ def test_a_joined_log_differentiates_each_recording_faster_with_half_its_own_win
     dq = ds.preprocessing["dq"]
     assert dq["source"] == "derivative of q" and dq["window"] == f"{windows[0]} and {windows[1]}"
     assert [(a, w) for a, w, _dt in dq["windows"]] == [(0, windows[0]), (1500, windows[1])]
+    own = [p.filter_parts()[0] for p in parts]  # each recording alone: one part, its rows, window and order
+    assert [(o.first, o.end, o.window) for o in own] == [(0, 1500, windows[0]), (0, 1200, windows[1])]
+    assert [(p.first, p.end, p.window, p.period, p.order) for p in ds.filter_parts()] == \
+        [(0, 1500, windows[0], own[0].period, own[0].order), (1500, 2700, windows[1], own[1].period, own[1].order)]
+    assert own[0].period == pytest.approx(DT)
     assert any(f"own window: {windows[0]} and {windows[1]} samples" in n for n in ds.notes)
     fast, w = faster_derivative(ds)
     alone = [faster_derivative(p) for p in parts]

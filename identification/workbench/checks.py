@@ -26,8 +26,7 @@ from .model import ModelSpec
 from .probes import base_per_fold, heldout_prediction
 
 __all__ = ["CHECK_ORDER_STEP", "DIFFERENTIATION", "SMOOTHING", "constant_error", "derivative_checks",
-           "faster_derivative", "preprocessing_checks", "recording_orders", "recording_windows", "smoothing_check",
-           "with_derivatives"]
+           "faster_derivative", "offset_spec", "preprocessing_checks", "smoothing_check", "with_derivatives"]
 
 CHECK_ORDER_STEP = 2  # the higher-order check's polynomial order over the velocity's own: a centred first
 # derivative's coefficients agree for orders 2k - 1 and 2k (order 2 -> 4: a cubic's derivative; 4 -> 6: a quintic's)
@@ -45,9 +44,9 @@ def faster_derivative(ds: Dataset, factor: float = 0.5) -> tuple[Dataset, int | 
     :func:`~.diagnose.diagnose` that a lag-like effect is not the differentiation's own lag."""
     if not _differentiated_here(ds):
         return None
-    parts = recording_windows(ds)
-    fast = [min(w, max(FAST_MIN_WINDOW, int(round(factor * w)) | 1)) for _, w, _ in parts]
-    if fast == [w for _, w, _ in parts]:
+    windows = [p.window for p in ds.filter_parts()]
+    fast = [min(w, max(FAST_MIN_WINDOW, int(round(factor * w)) | 1)) for w in windows]
+    if fast == windows:
         return None
     return with_derivatives(ds, fast), fast[0] if len(set(fast)) == 1 else windows_text(fast)
 
@@ -58,28 +57,16 @@ def _differentiated_here(ds: Dataset) -> bool:
         and "q" in ds.signals
 
 
-def recording_windows(ds: Dataset, key: str = "dq") -> list[tuple[int, int, float]]:
-    """``(first row, window [samples], sample period [s])`` of each recording of ``ds`` whose ``key`` (``dq``:
-    the velocity, ``tau``: the torque) was filtered here (one entry for a single log)."""
-    info = ds.preprocessing[key]
-    return list(info.get("windows", ((0, info["window"], ds.dt),)))
-
-
-def recording_orders(ds: Dataset, key: str = "dq") -> list[int]:
-    """The polynomial order of each recording's filter of ``key`` (as :func:`recording_windows`; 2 when unsaid)."""
-    info = ds.preprocessing[key]
-    return list(info.get("orders", (info.get("order", 2),) * len(recording_windows(ds, key))))
-
-
 def with_derivatives(ds: Dataset, windows: list[int], orders: list[int] | None = None) -> Dataset:
     """``ds`` with ``dq`` (and ``ddq``, unless the log has its own) differentiated again from ``q``, each recording
     on its own runs and period with its window of ``windows`` (``ddq`` over twice it) and polynomial order of
-    ``orders`` (default its own, :func:`recording_orders`; ``ddq`` at least 3); the preprocessing says so."""
-    orders = recording_orders(ds) if orders is None else orders
+    ``orders`` (default its own, :meth:`~.data.Dataset.filter_parts`; ``ddq`` at least 3); the preprocessing says
+    so."""
+    orders = [p.order for p in ds.filter_parts()] if orders is None else orders
     cols = {"dq": _per_recording(ds, ds.signals["q"], windows, 1, orders)}
     if "ddq_est" not in ds.signals:
         cols["ddq"] = _per_recording(ds, ds.signals["q"], windows, 2, [max(o, 3) for o in orders])
-    parts = [(a, w, dt) for (a, _, dt), w in zip(recording_windows(ds), windows, strict=True)]
+    parts = [(p.first, w, p.period) for p, w in zip(ds.filter_parts(), windows, strict=True)]
     dq = {**ds.preprocessing["dq"], "windows": parts, "orders": tuple(orders)}
     return replace(ds, signals=ds.signals.with_columns(**cols), preprocessing={**ds.preprocessing, "dq": dq})
 
@@ -89,12 +76,11 @@ def _per_recording(ds: Dataset, x: np.ndarray, windows: list[int], deriv: int, o
     """The ``deriv``-th derivative of ``x`` (0: smoothed), each recording of ``ds`` (as filtered for ``key``) on its
     own runs and period with its window of ``windows`` (twice it, less one, for ``deriv`` 2) and order of
     ``orders``."""
-    parts = recording_windows(ds, key)
-    runs = ds.signals.runs()
-    ends = [a for a, _, _ in parts[1:]] + [ds.n]
-    return np.concatenate([differentiate(x[a:b], [(r - a, e - a) for r, e in runs if a <= r < b], dt, deriv,
-                                         w if deriv < 2 else 2 * w - 1, order=o)
-                           for (a, _, dt), b, w, o in zip(parts, ends, windows, orders, strict=True)])
+    runs, out = ds.signals.runs(), []
+    for p, w, o in zip(ds.filter_parts(key), windows, orders, strict=True):
+        local = [(r - p.first, e - p.first) for r, e in runs if p.first <= r < p.end]
+        out.append(differentiate(x[p.first:p.end], local, p.period, deriv, w if deriv < 2 else 2 * w - 1, order=o))
+    return np.concatenate(out)
 
 
 def smoothing_check(ds: Dataset) -> tuple[Dataset, str] | None:
@@ -106,7 +92,7 @@ def smoothing_check(ds: Dataset) -> tuple[Dataset, str] | None:
     info = ds.preprocessing.get("tau", {})
     if info.get("source") != "smoothed" or "tau_raw" not in ds.signals or ds.dt is None:
         return None
-    windows = [w for _, w, _ in recording_windows(ds, "tau")]
+    windows = [p.window for p in ds.filter_parts("tau")]
     if min(windows) < 2 * SMOOTH_CHECK_ORDER + 3:
         return None
     orders = (SMOOTH_CHECK_ORDER,) * len(windows)
@@ -131,13 +117,21 @@ def derivative_checks(ds: Dataset) -> list[tuple[Dataset, str]]:
     fast = faster_derivative(ds)
     if fast is not None:
         out.append((fast[0], f"dq over {fast[1]} samples instead of {w0}"))
-    windows = [w for _, w, _ in recording_windows(ds)]
-    higher = [o + CHECK_ORDER_STEP for o in recording_orders(ds)]
+    parts = ds.filter_parts()
+    windows = [p.window for p in parts]
+    higher = [p.order + CHECK_ORDER_STEP for p in parts]
     # a window of no more samples leaves the polynomial no freedom: finite differences again
     if all(w > o for w, o in zip(windows, higher, strict=True)):
         fit = "a cubic" if set(higher) == {4} else "a quintic" if set(higher) == {6} else "a higher-order"
         out.append((with_derivatives(ds, windows, higher), f"dq by {fit} fit over the same {w0} samples"))
     return out
+
+
+def offset_spec(ds: Dataset, spec: ModelSpec) -> ModelSpec | None:
+    """``spec`` with a constant offset, for a servo-error log whose model lacks one; else None."""
+    if not ds.actuator or OFFSET in spec.linear:
+        return None
+    return replace(spec, linear=(*spec.linear, OFFSET))
 
 
 def constant_error(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], e0: float, min_gain: float,
@@ -146,9 +140,9 @@ def constant_error(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], 
     held-out error ``e0`` of ``spec``, a servo-error model without one (same blocks); else empty. A constant error is
     an encoder's zero, or a dead zone or friction under a load that never reverses: no other term tells them apart,
     and without the offset the effects that stand in for it (or none) are named."""
-    if not ds.actuator or OFFSET in spec.linear or not e0 > 0:
+    with_offset = offset_spec(ds, spec)
+    if with_offset is None or not e0 > 0:
         return ()
-    with_offset = replace(spec, linear=(*spec.linear, OFFSET))
     pred = heldout_prediction(base_per_fold(ds, with_offset, loss, folds, cache), ds.n)
     gain = 1.0 - error_of(ds.target - pred, ds.target, loss) / e0
     if not gain >= min_gain:

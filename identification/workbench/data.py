@@ -58,7 +58,8 @@ from ..data.tables import servotau_joints
 from .filters import cv_derivative, cv_window, differentiate
 from .resolution import encoder_resolution, quantisation_floor
 
-__all__ = ["MIN_SAMPLES", "OFFLINE_ESTIMATE", "Dataset", "align_torque", "describe", "load_dataset", "windows_text"]
+__all__ = ["MIN_SAMPLES", "OFFLINE_ESTIMATE", "Dataset", "FilterPart", "align_torque", "describe", "load_dataset",
+           "windows_text"]
 
 log = logging.getLogger(__name__)
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
@@ -67,6 +68,18 @@ PERIOD_JUMPS = 0.05  # fraction of long time steps beyond which the period jumps
 RUN_GAP = 1.5  # [periods] a longer time step ends a run of samples (filters do not cross it)
 _SIGNAL_OF_ROLE = {"position": "q", "command": "q_des", "torque": "tau", "velocity": "dq", "acceleration": "ddq",
                    "time": "t"}
+
+
+@dataclass(frozen=True)
+class FilterPart:
+    """The centred Savitzky-Golay filter one recording's derived signal went through: rows ``first`` to ``end``
+    (exclusive), ``window`` [samples], sample ``period`` [s], polynomial ``order``."""
+
+    first: int
+    end: int
+    window: int
+    period: float
+    order: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,6 +131,15 @@ class Dataset:
     def actuator(self) -> bool:
         """The target is the paper's ``q_des - q`` (the model can be saved as a motor model)."""
         return "command" in self.roles and "position" in self.roles
+
+    def filter_parts(self, key: str = "dq") -> list[FilterPart]:
+        """The filter of each recording whose ``key`` (``dq``: the velocity, ``tau``: the torque) was filtered here,
+        from :attr:`preprocessing` (one part for a single log; order 2 when unsaid)."""
+        info = self.preprocessing[key]
+        parts = info.get("windows", ((0, info["window"], self.dt),))
+        ends = [a for a, _, _ in parts[1:]] + [self.n]
+        orders = info.get("orders", (info.get("order", 2),) * len(parts))
+        return [FilterPart(a, b, w, dt, o) for (a, w, dt), b, o in zip(parts, ends, orders, strict=True)]
 
     @property
     def time(self) -> np.ndarray:

@@ -70,11 +70,11 @@ import numpy as np
 
 from servotau.actuator import Effect, Loss, excitation_report, resolve_effects
 from servotau.actuator.excitation import units_plausible
-from servotau.actuator.terms import K_TAU, OFFSET
+from servotau.actuator.terms import K_TAU
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
-from .checks import DIFFERENTIATION, SMOOTHING, constant_error, preprocessing_checks
+from .checks import DIFFERENTIATION, SMOOTHING, constant_error, offset_spec, preprocessing_checks
 from .data import Dataset
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
@@ -401,9 +401,7 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
     Friction-like effects are not checked against the offset: a dead zone under a load of mostly one sign, or an
     asymmetric Coulomb friction on a joint that rarely rests, is partly a constant and still physical."""
     preprocessed = None  # the log with less biased preprocessing (checks.preprocessing_checks), built on first need
-    offset = None
-    if ds.actuator and OFFSET not in spec.linear:
-        offset = replace(spec, linear=(*spec.linear, OFFSET))
+    offset = offset_spec(ds, spec)
     while True:
         i = next((k for k, c in enumerate(ranking) if nameable(c, min_gain)), None)
         causes = CHECKED.get(ranking[i].family, ()) if i is not None else ()

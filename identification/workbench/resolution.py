@@ -61,18 +61,14 @@ def _noise_gain(ds, key: str, deriv: int) -> float:
     weighted by its samples; 1 for a signal that is the log's own."""
     from servotau.signal.savgol import causal_coeffs
 
-    info = ds.preprocessing.get(key, {})
-    if info.get("source") not in ("smoothed", "derivative of q"):
+    if ds.preprocessing.get(key, {}).get("source") not in ("smoothed", "derivative of q"):
         return 1.0
-    parts = list(info.get("windows", ((0, info["window"], ds.dt),)))
-    ends = [a for a, _, _ in parts[1:]] + [ds.n]
-    orders = info.get("orders", (info.get("order", 2),) * len(parts))
     total = 0.0
-    for (a, w, dt), b, order in zip(parts, ends, orders, strict=True):
-        if w > order:
-            total += (b - a) * float(np.sum(causal_coeffs(w, order, deriv, dt, "centre") ** 2))
+    for p in ds.filter_parts(key):
+        if p.window > p.order:
+            total += (p.end - p.first) * float(np.sum(causal_coeffs(p.window, p.order, deriv, p.period, "centre") ** 2))
         else:  # filters.differentiate falls back to the central difference
-            total += (b - a) * (0.5 / dt ** 2 if deriv else 1.0)
+            total += (p.end - p.first) * (0.5 / p.period ** 2 if deriv else 1.0)
     return math.sqrt(total / ds.n)
 
 
