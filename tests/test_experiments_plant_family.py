@@ -36,6 +36,16 @@ def test_plant_code_is_independent_of_simulator_and_workbench():
         assert not [m for m in mods if any(x in m for x in ("simrobot", "actuator", "identification"))]
 
 
+@pytest.mark.parametrize("effect", ["clean", "backlash", "saturation", "thermal_drift", "stribeck"])
+def test_a_plant_simulated_alone_is_its_batch_result_bit_for_bit(family, effect):
+    """Alone, the simulation skips every term whose coefficient is zero; in the batch of every effect it computes
+    them all. Both give the same signals, bit for bit (the skipped terms add exact zeros)."""
+    plant, true = family[effect]
+    (alone,) = pf.simulate([plant], DUR)
+    for key, value in true.items():
+        np.testing.assert_array_equal(alone[key], value, err_msg=key)
+
+
 def test_clean_plant_obeys_the_two_term_model_exactly(family):
     plant, true = family["clean"]
     assert np.std(true["q_des"] - true["q"]) > 1e-4  # the servo error is not trivial
