@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from servotau.errors import HalError
-from servotau.hal import Backend, InProcessBackend, LogWriter, ReplayBackend
+from servotau.hal import Backend, InProcessBackend, LogWriter, ReplayBackend, ZenohBackend
 from servotau.simrobot.fake import FakeRobot
 
 LIVE = ("zenoh", "inprocess")
@@ -116,6 +116,12 @@ def test_info_is_consistent(backend):
     assert info.ft_sensor_names == ref.ft_sensor_names and info.max_position_error == ref.max_position_error
 
 
+def _truth(backend: Backend):
+    """The ground truth of the last frame read; over zenoh it comes after the frame: wait for it up to 5 s (the
+    backend's default of 5 ms is for a control loop, which goes on without it)."""
+    return backend.ground_truth(wait=5.0) if isinstance(backend, ZenohBackend) else backend.ground_truth()
+
+
 def test_write_array_and_ground_truth(backend):
     """write_array is the vector fast path; ground truth (sim) is that of the last frame read."""
     f = backend.read()
@@ -125,10 +131,10 @@ def test_write_array_and_ground_truth(backend):
         backend.write_array(np.zeros(3))
     for _ in range(3):
         f = backend.read()
-        t = backend.ground_truth()
+        t = _truth(backend)
         assert t is not None and t.q.shape == (30,) and t.seq == f.seq
         backend.write({})
-        assert backend.ground_truth().seq == f.seq  # still the tick of the frame read, after the write
+        assert _truth(backend).seq == f.seq  # still the tick of the frame read, after the write
 
 
 def test_closed_backend_refuses_io(backend):

@@ -84,18 +84,29 @@ def controller(port: int, *args: str) -> subprocess.Popen:
                             preexec_fn=_die_with_parent)
 
 
-def robot_status(port: int, until, *, robot: str = "fake", timeout: float = 30.0) -> dict:
+def query_status(session, robot: str = "fake", timeout: float = 10.0) -> dict | None:
+    """One answer of the robot's ``.../status`` queryable on the zenoh ``session`` (a
+    :class:`~servotau.hal.wire.session.Session`), or None when none came within ``timeout`` [s] (a loaded robot
+    answers after the commands queued before the query)."""
+    from servotau.hal import keys
+
+    for reply in session.z.get(keys(robot).status, timeout=timeout):
+        if reply.ok is not None:
+            return json.loads(reply.ok.payload.to_bytes())
+    return None
+
+
+def robot_status(port: int, until, *, robot: str = "fake", timeout: float = 30.0) -> dict | None:
     """The robot's ``.../status`` once ``until(status)`` holds, polled every 20 ms; ``timeout`` [s] of wall time
     is a safety net only (then the last status is returned, for the caller's assertion to show)."""
-    from servotau.hal import keys
     from servotau.hal.wire.session import Session, zenoh_config
 
     s = Session(zenoh_config(connect=[endpoint(port)]))
     try:
         deadline = time.monotonic() + timeout
         while True:
-            st = json.loads(next(iter(s.z.get(keys(robot).status, timeout=2.0))).ok.payload.to_bytes())
-            if until(st) or time.monotonic() > deadline:
+            st = query_status(s, robot)
+            if (st is not None and until(st)) or time.monotonic() > deadline:
                 return st
             time.sleep(0.02)
     finally:
