@@ -128,7 +128,7 @@ def make_targets() -> set[str]:
 
 
 def help_text(module: str) -> str:
-    r = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=30)
+    r = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     return r.stdout
 
