@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
-from support.hal import free_port
+from support.hal import free_port, query_status
 
 from servotau.apps.certs import CONTROLLER_CN, make_certs
 from servotau.config import Section
@@ -101,14 +101,15 @@ def test_tls_and_access_control_only_the_controller_identity_drives(certs):
             spoof = claim_request(str(other.z.zid()), "h", 1, "u")  # a live session with a transport to the robot
             claim = list(viewer.z.get(f"{keys('fake').prefix}/claim", payload=spoof, timeout=1.0,
                                       source_info=zenoh.SourceInfo(other.z.id, 0)))
-            status = json.loads(next(iter(viewer.z.get(keys("fake").status, timeout=2.0))).ok.payload.to_bytes())
+            status = query_status(viewer)
             frames.undeclare()
         finally:
             viewer.close()
             other.close()
         assert claim == []  # the access control dropped the claim query
         assert server.status()["claims_refused"] == 0 and server.status()["claim_holder"] is None  # never reached
-        assert status["ticks"] == 0 and status["commands_accepted"] == 0 and status["state"] == "WAITING"
+        assert status is not None and status["ticks"] == 0 and status["commands_accepted"] == 0 \
+            and status["state"] == "WAITING"
         assert status["commands_not_claimer"] == 0 and status["commands_rejected"] == 0  # never reached the robot
         t0 = time.monotonic()
         with ZenohBackend("fake", connect=[ep], frame_timeout=TIMEOUT,

@@ -275,12 +275,10 @@ def simulate(plants: list[Plant], duration: float = DURATION, *, dt: float = DT)
             rec["q"][:, j], rec["dq"][:, j], rec["tau"][:, j] = q_m, v_m, tau_j
             rec["tau_m"][:, j], rec["heat"][:, j] = tau_m, heat
         v_m = v_m + dt * a
+        q_m = q_m + dt * v_m
         if backlash:
             v_l = np.where(bl, v_l + dt * a_l, v_m)
-            q_m = q_m + dt * v_m
             q_l = np.where(bl, q_l + dt * v_l, q_m)
-        else:
-            q_m = q_m + dt * v_m
     t = np.arange(n_rec) * RECORD
     out = []
     for k, _p in enumerate(plants):
