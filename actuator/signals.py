@@ -237,6 +237,17 @@ def smooth_sign(x: np.ndarray, v: float) -> np.ndarray:
     return np.sign(x) if v <= 0.0 else np.tanh(x / v)
 
 
+def sign_of(s: Signals, name: str, v: float) -> np.ndarray:
+    """:func:`smooth_sign` of signal ``name`` (read-only), computed once per ``v`` for ``s`` and its copies
+    (:meth:`Signals.derived`): the friction terms read the same sign of ``dq`` in every fit of a diagnosis."""
+    return s.derived(name, ("smooth_sign", v), lambda x: smooth_sign(x, v))
+
+
+def bell_of(s: Signals, name: str, width: float) -> np.ndarray:
+    """``exp(-(x / width)^2)`` of signal ``name`` (read-only), computed once per ``width`` like :func:`sign_of`."""
+    return s.derived(name, ("bell", width), lambda x: np.exp(-((x / width) ** 2)))
+
+
 def smooth_sign_scalar(x: float, v: float) -> float:
     """:func:`smooth_sign` of one sample."""
     return (x > 0) - (x < 0) if v <= 0.0 else math.tanh(x / v)

@@ -8,6 +8,7 @@ from servotau.actuator.friction_state import state, steps
 from servotau.actuator.signals import (
     Signals,
     acceleration,
+    bell_of,
     command_lead,
     delayed,
     direction_latch,
@@ -16,7 +17,9 @@ from servotau.actuator.signals import (
     lowpass,
     run_onsets,
     sign_latch,
+    sign_of,
     since_onset,
+    smooth_sign,
 )
 from servotau.errors import IdentificationError
 
@@ -39,6 +42,21 @@ def test_derived_is_computed_once_for_a_signals_and_its_copies_and_again_for_ano
     assert len(calls) == 2
     with pytest.raises(ValueError):
         a[0] = 1.0
+
+
+def test_the_sign_and_bell_of_dq_are_those_of_the_formula_once_per_width():
+    """The friction terms' sign(dq) and exp(-(dq / v)^2): the formula's numbers, kept for the copies a fit makes
+    (with another u), one per width, computed again for another dq."""
+    dq = np.linspace(-0.1, 0.1, 41)
+    s = Signals({"dq": dq, "u": np.zeros(41)}, 1e-3, 41)
+    a, b = sign_of(s, "dq", 0.01), bell_of(s, "dq", 0.02)
+    np.testing.assert_array_equal(a, smooth_sign(dq, 0.01))
+    np.testing.assert_array_equal(b, np.exp(-((dq / 0.02) ** 2)))
+    copy = s.with_columns(u=np.ones(41))
+    assert sign_of(copy, "dq", 0.01) is a and bell_of(copy, "dq", 0.02) is b
+    np.testing.assert_array_equal(sign_of(s, "dq", 0.0), np.sign(dq))
+    assert not np.array_equal(sign_of(s, "dq", 0.05), a)
+    np.testing.assert_array_equal(sign_of(s.with_columns(dq=-dq), "dq", 0.01), -a)
 
 
 # -- runs: every filter with memory restarts at each start (hand-computed) -----------------------------------------

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support.identification import SHORT_PLAN
+from support.identification import short_plan
 
 from servotau.apps.operator_script import write_sim_setup
 from servotau.cli import main as cli
@@ -32,10 +32,11 @@ def servotau(*args, timeout=900):  # [s] a safety net: a loaded machine took ove
 
 @pytest.fixture(scope="module")
 def cli_run(tmp_path_factory):
-    """`identify collect` of a short plan with matching pushes, then `identify fit --json`, as subprocesses."""
+    """`identify collect` of a short plan (17 s of robot time) with matching pushes, then `identify fit --json`, as
+    subprocesses."""
     d = tmp_path_factory.mktemp("ident_cli")
     plan_path = d / "plan.toml"
-    plan_path.write_text(SHORT_PLAN)
+    plan_path.write_text(short_plan(sweep=3.0, hold=3.0))
     sim = write_sim_setup(load_plan(plan_path)[0], d)
     log, motors = d / "log.parquet", d / "motors.toml"
     collect = servotau("collect", "--out", log, "--backend", "inprocess", "--plan", plan_path, "--sim-config", sim)
@@ -48,13 +49,15 @@ def cli_run(tmp_path_factory):
 def test_collect_writes_a_log_with_frames_commands_and_progress(cli_run):
     """collect records every tick with q_des and ground truth, and prints progress lines with elapsed/total."""
     log = LogReader(cli_run["log"])
-    assert len(log) == 23_000
+    duration = load_plan(cli_run["plan"])[0].duration  # [s] of robot time
+    ticks = round(duration / log.info.period)
+    assert len(log) == ticks == 17_000
     assert np.isfinite(log.joints("q_des")).all() and np.isfinite(log.joints("q")).all()
     assert log.has_truth and log.metadata["servotau.identification.backend"] == "inprocess"
     out = cli_run["collect"].stdout
-    steps = re.findall(r"\[\s*([\d.]+)/23\.0 s robot", out)
-    assert len(steps) >= 6 and float(steps[-1]) == pytest.approx(23.0)
-    assert "PUSH NOW" in out and f"wrote {cli_run['log']}: 23000 ticks" in out
+    steps = re.findall(rf"\[\s*([\d.]+)/{duration:.1f} s robot", out)
+    assert len(steps) >= 6 and float(steps[-1]) == pytest.approx(duration)
+    assert "PUSH NOW" in out and f"wrote {cli_run['log']}: {ticks} ticks" in out
 
 
 def test_fit_json_recovers_the_servo_and_over_estimates_less_than_least_squares(cli_run):

@@ -3,6 +3,8 @@ velocity, and no lag-like false alarm on a clean log of a stiff plant (servotau/
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from support.synthetic import two_sine_log
@@ -33,11 +35,22 @@ def test_time_jumps_are_noted():
     assert any(n.startswith("time: 1 steps longer") for n in ds.notes)
 
 
+@functools.cache
+def _simulated(seed: int, hidden: tuple[str, ...], period: float | None = 1e-3):
+    """A plant of the independent family and its true signals over 8 s, simulated once per test process (several
+    tests read the same clean log; nothing here writes into the arrays)."""
+    from servotau.experiments import plant_family as pf
+
+    plant = pf.draw_plant(seed, hidden=hidden) if period is None else pf.draw_plant(seed, hidden=hidden,
+                                                                                     period=period, duration=8.0)
+    (true,) = pf.simulate([plant], 8.0)
+    return plant, true
+
+
 def _plant_diagnosis(seed, hidden, **load):
     from servotau.experiments import plant_family as pf
 
-    plant = pf.draw_plant(seed, hidden=hidden, period=1e-3, duration=8.0)
-    (true,) = pf.simulate([plant], 8.0)
+    plant, true = _simulated(seed, hidden)
     ds = load_dataset(dict(pf.measure(plant, true)), **load)
     return plant, ds, diagnose(ds, parse_spec("paper", ds.signals))
 
@@ -66,8 +79,7 @@ def test_the_faster_derivative_check_runs_on_a_joined_log():
     from servotau.identification.workbench.checks import faster_derivative
     from servotau.identification.workbench.recordings import combine
 
-    plant = pf.draw_plant(0, hidden=(), period=1e-3, duration=8.0)
-    (true,) = pf.simulate([plant], 8.0)
+    plant, true = _simulated(0, ())
     log = pf.measure(plant, true)
     half = len(log["t"]) // 2
     ds = combine([load_dataset({k: v[:half] for k, v in log.items()}, dq_order=2),
@@ -87,9 +99,7 @@ def test_the_chosen_derivative_order_follows_the_motion_better():
     from servotau.experiments import plant_family as pf
 
     for seed, period in ((0, 1e-3), (2401, None), (2634, None)):
-        plant = pf.draw_plant(seed, hidden=()) if period is None else pf.draw_plant(seed, hidden=(), period=period,
-                                                                                     duration=8.0)
-        (true,) = pf.simulate([plant], 8.0)
+        plant, true = _simulated(seed, (), period)
         log = dict(pf.measure(plant, true))
         dq = true["dq"][:: int(round(plant.period / pf.RECORD))]
         ds, ds2 = load_dataset(log), load_dataset(log, dq_order=2)
@@ -106,16 +116,29 @@ def test_true_delay_survives_the_less_biased_derivatives():
     assert d.verdict == "missing_effect" and d.ranking[0].effect == "delay"
 
 
-@pytest.mark.parametrize("hidden", [(), ("coulomb",), ("stribeck",)])
-def test_friction_the_order_2_derivative_fakes_is_not_named_and_true_friction_is(hidden):
+FRICTION_HIDDEN = ((), ("coulomb",), ("stribeck",))
+
+
+@pytest.fixture(scope="module")
+def seed_2542():
+    """Plant family seed 2542 clean, with Coulomb and with Stribeck friction: hidden -> (plant, true signals),
+    simulated side by side (a plant of a batch is the plant simulated alone, bit for bit:
+    test_experiments_plant_family)."""
+    from servotau.experiments import plant_family as pf
+
+    plants = [pf.draw_plant(2542, hidden=h) for h in FRICTION_HIDDEN]
+    return dict(zip(FRICTION_HIDDEN, zip(plants, pf.simulate(plants), strict=True), strict=True))
+
+
+@pytest.mark.parametrize("hidden", FRICTION_HIDDEN)
+def test_friction_the_order_2_derivative_fakes_is_not_named_and_true_friction_is(hidden, seed_2542):
     """Plant family seed 2542 (10 ms; on the clean log dq by the order-2 derivative over 7 samples). Clean, a
     smoothed sign of dq fits the derivative's amplitude error (coulomb 16 % of the held-out error, 0.06 % with the
     cubic over the same samples): coulomb is untestable for the differentiation's error and nothing is named. The
     same plant with Coulomb or Stribeck friction hidden keeps it named: true friction survives the checks."""
     from servotau.experiments import plant_family as pf
 
-    plant = pf.draw_plant(2542, hidden=hidden)
-    (true,) = pf.simulate([plant])
+    plant, true = seed_2542[hidden]
     ds = load_dataset(dict(pf.measure(plant, true)))
     d = diagnose(ds, parse_spec("paper", ds.signals))
     if hidden:

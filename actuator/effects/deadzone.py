@@ -51,7 +51,16 @@ from servotau.errors import IdentificationError
 from ..excitation import Excitation, has_torque
 from ..model import EffectTerm, MotorModel
 from ..registry import Effect
-from ..signals import Signals, command_lead, direction_latch, hysteresis, sample_lead, sign_latch, since_onset
+from ..signals import (
+    Signals,
+    bell_of,
+    command_lead,
+    direction_latch,
+    hysteresis,
+    sample_lead,
+    sign_latch,
+    since_onset,
+)
 
 ORDER = 50
 REST = (0.0, 0.01, 0.05)  # [rad/s] resting below this speed at the last edge (0: no latch)
@@ -87,7 +96,7 @@ def deadzone(
     step = np.clip(m / band, -1.0, 1.0)
     if v_th <= 0.0:
         return step
-    rest = direction_latch(m, band, s.starts) * np.exp(-((s["dq"] / v_th) ** 2))
+    rest = direction_latch(m, band, s.starts) * bell_of(s, "dq", v_th)
     return step + (1.0 - np.abs(step)) * rest
 
 

@@ -11,14 +11,14 @@ import numpy as np
 
 from ..excitation import Excitation, both_directions
 from ..registry import Effect
-from ..signals import V_EPS, Signals, smooth_sign, smooth_sign_scalar
+from ..signals import V_EPS, Signals, sign_of, smooth_sign_scalar
 
 ORDER = 60
 GRID = tuple({"v_eps": v} for v in V_EPS[1:])
 
 
 def direction_gain(s: Signals, v_eps: float) -> np.ndarray:
-    return smooth_sign(s["dq"], v_eps) * s["u"]
+    return sign_of(s, "dq", v_eps) * s["u"]
 
 
 def scalar(x: Mapping[str, float], v_eps: float) -> float:

@@ -11,14 +11,14 @@ import numpy as np
 
 from ..excitation import Excitation, both_directions, has_torque
 from ..registry import Effect
-from ..signals import V_EPS, Signals, smooth_sign, smooth_sign_scalar
+from ..signals import V_EPS, Signals, sign_of, smooth_sign_scalar
 
 ORDER = 70
 GRID = tuple({"v_eps": v} for v in V_EPS[1:])
 
 
 def load_friction(s: Signals, v_eps: float) -> np.ndarray:
-    return np.abs(s["tau"]) * smooth_sign(s["dq"], v_eps)
+    return np.abs(s["tau"]) * sign_of(s, "dq", v_eps)
 
 
 def scalar(x: Mapping[str, float], v_eps: float) -> float:

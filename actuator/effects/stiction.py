@@ -13,7 +13,7 @@ import numpy as np
 
 from ..excitation import Excitation, both_directions, held
 from ..registry import Effect
-from ..signals import Signals, direction_latch
+from ..signals import Signals, bell_of, direction_latch
 
 ORDER = 40
 GRID = tuple({"v_th": v} for v in (0.005, 0.01, 0.02, 0.05))
@@ -21,7 +21,7 @@ GRID = tuple({"v_th": v} for v in (0.005, 0.01, 0.02, 0.05))
 
 def stiction(s: Signals, v_th: float) -> np.ndarray:
     dq = s["dq"]
-    return direction_latch(dq, v_th, s.starts) * np.exp(-((dq / v_th) ** 2))
+    return direction_latch(dq, v_th, s.starts) * bell_of(s, "dq", v_th)
 
 
 class StictionOnline:

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..excitation import Excitation, both_directions, slow_and_fast
 from ..registry import Effect
-from ..signals import Signals, smooth_sign, smooth_sign_scalar
+from ..signals import Signals, bell_of, sign_of, smooth_sign_scalar
 
 ORDER = 30
 V_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)  # [rad/s] Stribeck velocities
@@ -26,8 +26,7 @@ GRID = tuple({"v_s": v, "v_eps": e, "level": c} for c in LEVELS for v in V_S
 
 
 def stribeck(s: Signals, v_s: float, v_eps: float, level: float = 0.0) -> np.ndarray:
-    dq = s["dq"]
-    return smooth_sign(dq, v_eps) * (level + (1.0 - level) * np.exp(-((dq / v_s) ** 2)))
+    return sign_of(s, "dq", v_eps) * (level + (1.0 - level) * bell_of(s, "dq", v_s))
 
 
 def scalar(x: Mapping[str, float], v_s: float, v_eps: float, level: float = 0.0) -> float:

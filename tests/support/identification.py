@@ -11,18 +11,18 @@ from servotau.identification.collect import HoldPlan, SweepPlan
 from servotau.identification.plan import CollectionPlan, load_plan
 from servotau.identification.session import run_collection
 
-__all__ = ["SHORT_PLAN", "collect_short_log"]
+__all__ = ["SHORT_PLAN", "collect_short_log", "short_plan"]
 
 # A short collection plan (two joints, two holds) for the `servotau identify` commands
-SHORT_PLAN = """[collect]
+SHORT_PLAN_TEMPLATE = """[collect]
 joints = ["RLEG_JOINT2", "RLEG_JOINT3"]
 settle = 1.0
 [collect.sweep]
 a = 0.1
-duration = 5.0
+duration = {sweep}
 [collect.hold]
 move = 1.0
-hold = 4.0
+hold = {hold}
 [[collect.hold.configurations]]
 RLEG_JOINT2 = -0.453786
 RLEG_JOINT3 = 0.872665
@@ -35,6 +35,15 @@ RLEG_JOINT4 = -0.6
 loss = "asymmetric"
 w = 100.0
 """
+
+
+def short_plan(sweep: float = 5.0, hold: float = 4.0) -> str:
+    """A collection plan (TOML) of two right-leg joints: 1 s of settle, a sweep of ``sweep`` s per joint, two
+    holds of ``hold`` s (1 s move each), fitted with the asymmetric loss (w = 100)."""
+    return SHORT_PLAN_TEMPLATE.format(sweep=sweep, hold=hold)
+
+
+SHORT_PLAN = short_plan()  # 23 s of robot time
 
 
 def collect_short_log(folder: Path, joints: tuple[str, ...] = ("RLEG_JOINT3",), sweep: float = 4.0,
