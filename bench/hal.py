@@ -20,6 +20,8 @@ truth: a pure controller).
 - ``*_fifo50``: the same figures with both processes under SCHED_FIFO priority 50
   (``realtime_priority``, hal/robot/realtime.py; as a robot's control loop runs), if the user may.
 - ``encode_us`` / ``decode_us``: one 30-joint frame (best of 5).
+- ``robot_lost_ms_p50`` / ``_max``: from the robot process's SIGKILL to the controller's ``RobotLost`` (the robot's
+  liveliness token gone), over ``--lost-runs`` runs; target 100 ms (docs/real_backend.md, "Kill the bridge").
 - ``baseline_rtt_p50_us`` / ``_p99_us``: a bare Zenoh Python ping-pong with the same sizes,
   settings and threading (bench/_zenoh_pingpong.py, ``channel``), in the same run;
   ``rtt_*_ratio_to_baseline``: what the HAL adds, as a ratio that a shared machine's load changes
@@ -38,6 +40,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -49,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from servotau.apps.processes import free_port, stop_process, wait_ready
-from servotau.hal import ZenohBackend
+from servotau.hal import RobotLost, ZenohBackend
 from servotau.hal.wire.protocol import decode_frame, encode_frame
 from servotau.simrobot.fake import FakeRobot
 
@@ -57,7 +60,8 @@ FAKE_ROBOT = "servotau.simrobot.fake:FakeRobot"
 
 
 @contextmanager
-def _server(robot: str, scenario: str | None, clock: str, priority: int = 0):
+def _robot_process(robot: str, scenario: str | None, clock: str, priority: int = 0):
+    """The robot process (the HAL server) on a free loopback port, ready: ``(process, endpoint)``."""
     port = free_port()
     with tempfile.TemporaryDirectory() as tmp:
         ready = Path(tmp) / "ready"
@@ -68,11 +72,17 @@ def _server(robot: str, scenario: str | None, clock: str, priority: int = 0):
         p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             wait_ready(p, ready, 30.0, f"robot server ({' '.join(args)})")
-            with ZenohBackend(_robot_name(robot, scenario), connect=[f"tcp/127.0.0.1:{port}"], truth=False,
-                              realtime_priority=priority) as backend:
-                yield backend
+            yield p, f"tcp/127.0.0.1:{port}"
         finally:
             stop_process(p)
+
+
+@contextmanager
+def _server(robot: str, scenario: str | None, clock: str, priority: int = 0):
+    with _robot_process(robot, scenario, clock, priority) as (_, endpoint):
+        with ZenohBackend(_robot_name(robot, scenario), connect=[endpoint], truth=False,
+                          realtime_priority=priority) as backend:
+            yield backend
 
 
 def _robot_name(robot: str, scenario: str | None) -> str:
@@ -123,6 +133,26 @@ def bench_realtime(robot: str, scenario: str | None, duration: float, priority: 
             f"realtime_holds{sfx}": st["holds"]}
 
 
+def bench_robot_lost(runs: int) -> dict:
+    """From the robot process's SIGKILL to :class:`RobotLost` in the controller's read/write loop (its liveliness
+    token gone; the frame timeout, 5 s here, never fires first), wall time over ``runs`` runs."""
+    ms = []
+    for _ in range(runs):
+        with _robot_process(FAKE_ROBOT, None, "lockstep") as (p, endpoint):
+            with ZenohBackend("fake", connect=[endpoint], truth=False, frame_timeout=5.0) as b:
+                _control(b, ticks=300)
+                t_kill = time.monotonic()
+                os.kill(p.pid, signal.SIGKILL)
+                try:
+                    _control(b, seconds=10.0)
+                except RobotLost:
+                    ms.append((time.monotonic() - t_kill) * 1e3)
+                else:
+                    raise SystemExit("bench_robot_lost: the controller ran 10 s after the robot's SIGKILL")
+    return {"robot_lost_ms_p50": float(np.median(ms)), "robot_lost_ms_max": max(ms), "robot_lost_target_ms": 100.0,
+            "robot_lost_met": max(ms) <= 100.0, "robot_lost_runs": runs}
+
+
 def bench_baseline(ticks: int, pattern: str = "channel", zenoh_runtime: str | None = None,
                    prefix: str | None = None) -> dict:
     """Bare Zenoh ping-pong (bench/_zenoh_pingpong.py), the floor under ``rtt_*``, in this run;
@@ -163,8 +193,10 @@ def main() -> int:
     ap.add_argument("--fifo", type=int, default=50,
                     help="also run both parts with both processes under SCHED_FIFO at this priority (0: skip; "
                          "without the permission they warn and run with ordinary scheduling)")
+    ap.add_argument("--lost-runs", type=int, default=5, help="robot SIGKILL runs (default 5)")
     args = ap.parse_args()
-    out = {**bench_codec(), **bench_baseline(args.ticks), **bench_baseline(args.ticks, "threads"),
+    out = {**bench_codec(), **bench_robot_lost(args.lost_runs),
+           **bench_baseline(args.ticks), **bench_baseline(args.ticks, "threads"),
            **bench_baseline(args.ticks, zenoh_runtime="()", prefix="baseline_zenoh_default_pools"),
            **bench_lockstep(args.robot, args.scenario, args.ticks),
            **bench_realtime(args.robot, args.scenario, args.duration),
