@@ -225,7 +225,10 @@ class Peer:
             self._pub = self.session.keep(self.z.declare_publisher(
                 self.k.command, express=True, congestion_control=zenoh.CongestionControl.BLOCK,
                 priority=zenoh.Priority.REAL_TIME))
-            time.sleep(0.2)  # let the publisher find the robot's subscriber
+            # let the publisher find the robot's subscriber (access control may hide it: then put after 2 s)
+            deadline = time.monotonic() + 2.0
+            while not self._pub.matching_status.matching and time.monotonic() < deadline:
+                time.sleep(0.01)
         self._pub.put(payload, attachment=attachment)
 
     def close(self) -> None:

@@ -151,7 +151,9 @@ def test_fuzzed_commands_are_never_applied(tmp_path):
         try:
             pub = s.keep(s.z.declare_publisher(keys("fake").command,
                                                congestion_control=zenoh.CongestionControl.BLOCK))
-            time.sleep(0.3)  # let the publisher find the robot's subscriber
+            deadline = time.monotonic() + 30  # a safety net: the publisher finds the robot's subscriber first
+            while not pub.matching_status.matching and time.monotonic() < deadline:
+                time.sleep(0.01)
             for p in payloads:
                 pub.put(p)
             deadline = time.monotonic() + 60

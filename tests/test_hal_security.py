@@ -355,7 +355,7 @@ def test_a_claim_needs_a_session_the_robot_can_watch():
         try:
             def claim(zid: str) -> dict:
                 r = next(iter(peer.z.get(claim_key(keys("fake").prefix), payload=claim_request(zid, "h", 1, "u"),
-                                         timeout=2.0)))
+                                         timeout=10.0)))  # [s] a safety net: the first reply ends the wait
                 return json.loads(r.ok.payload.to_bytes())
 
             forged = claim("abcdef")
