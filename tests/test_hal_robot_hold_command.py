@@ -56,6 +56,26 @@ def test_a_hold_command_holds_the_answered_frames_posture_braking_then_resumes_w
         assert fw.state == FirmwareState.RUNNING and not fw.hold_commanded
 
 
+def test_a_hold_command_in_the_tick_an_encoder_fault_starts_keeps_the_faults_plain_hold():
+    """The controller trips in the tick one encoder fails (NaN): the fault's hold stands, the last valid reading of
+    every joint, not braked from the firmware's own velocity (no brake after an encoder fault), and the reason
+    names both."""
+    fw = Firmware(INFO, SafetyConfig(hold_damping=0.01, **FAST))
+    for k in range(5):
+        fw.accept(np.full(INFO.nq, 1e-3 * (k + 1)), float(k))
+        fw.output(np.full(INFO.nq, 1e-3 * k), float(k))
+    fw.accept(np.full(INFO.nq, 0.5), 5.0, hold=True, age=2)
+    q = np.full(INFO.nq, 5e-3)
+    q[0] = np.nan
+    out = fw.output(q, 5.0)
+    assert fw.state == FirmwareState.HOLDING and fw.sensor_fault
+    assert "encoders invalid" in fw.hold_reason and "COMMAND_HOLD" in fw.hold_reason, fw.hold_reason
+    expected = np.full(INFO.nq, 5e-3)
+    expected[0] = 4e-3  # joint 0's last valid reading
+    np.testing.assert_allclose(out, expected, atol=1e-12)
+    np.testing.assert_allclose(fw.output(q, 5.001), expected, atol=1e-12)  # and it stays there
+
+
 def test_a_silent_holding_controller_leaves_a_plain_hold_and_a_claim_end_too():
     fw = Firmware(INFO, SafetyConfig(hold_after=0.01, **FAST))
     fw.accept(np.zeros(INFO.nq), 0.0)

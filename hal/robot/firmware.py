@@ -215,7 +215,10 @@ class Firmware:
         if self._sensors(valid.all()) or self.state == FirmwareState.SERVO_OFF:
             return None
         if self._hold_age is not None:  # a commanded hold begins
-            self._hold("the controller tripped (COMMAND_HOLD)", self._hold_age)
+            if self.sensor_fault:  # in the tick the encoders failed: the fault's plain hold stands, unbraked
+                self.hold_reason = f"{self.hold_reason}; the controller tripped (COMMAND_HOLD)"
+            else:
+                self._hold("the controller tripped (COMMAND_HOLD)", self._hold_age)
             self._hold_age = None
         age = now - self._t_cmd
         if not self.watchdog(now) and self.state != FirmwareState.RUNNING and self._q_hold is None:
