@@ -76,6 +76,26 @@ def test_a_hold_command_in_the_tick_an_encoder_fault_starts_keeps_the_faults_pla
     np.testing.assert_allclose(fw.output(q, 5.001), expected, atol=1e-12)  # and it stays there
 
 
+@pytest.mark.parametrize("age", [1, 5, 40])
+def test_a_commanded_holds_first_step_stays_within_half_the_position_error_trip(age):
+    """Joints moving at up to 10 rad/s, a hold command answering a frame ``age`` ticks old, strong braking
+    (hold_damping 1 s): the first held q_des is within half of ``max_position_error`` of the measured angles (a
+    quarter for the answered posture, a quarter for the brake), so the hold itself never trips the servos."""
+    fw = Firmware(INFO, SafetyConfig(hold_damping=1.0, **FAST))
+    v = np.linspace(-10.0, 10.0, INFO.nq)  # [rad/s]
+    dt = INFO.period
+    for k in range(60):
+        fw.accept(v * dt * (k + 1), k * dt)
+        fw.output(v * dt * k, k * dt)
+    fw.accept(np.zeros(INFO.nq), 60 * dt, hold=True, age=age)
+    q = v * dt * 60
+    out = fw.output(q, 60 * dt)
+    assert fw.state == FirmwareState.HOLDING
+    step = np.abs(out - q)
+    assert step.max() <= 0.5 * fw.max_error + 1e-12, (step.max(), fw.max_error)
+    assert step.max() > 0.25 * fw.max_error  # the bound is reached here: the test exercises it
+
+
 def test_a_silent_holding_controller_leaves_a_plain_hold_and_a_claim_end_too():
     fw = Firmware(INFO, SafetyConfig(hold_after=0.01, **FAST))
     fw.accept(np.zeros(INFO.nq), 0.0)
