@@ -309,6 +309,49 @@ def test_a_start_while_the_reference_moves_is_built_again_where_it_comes_to_rest
     assert steps.max() < 2e-3, steps.max()  # [rad] per tick: the wave's own speed, no jump at the start
 
 
+def test_a_start_refused_when_built_again_leaves_the_reference_at_rest_where_it_stopped(tmp_path, monkeypatch):
+    """``start`` during a wave whose second build (on where the stop rests) fails, as a user's task may for another
+    posture: the start is refused with the reason, the reference rests where the stop ended, without a jump, until
+    the operator stops the run."""
+    (tmp_path / "wave.toml").write_text(WAVE.replace("duration = 0.3", "duration = 2.0"))
+    (tmp_path / "rest.toml").write_text(REST)
+    channel, answers, builds = OperatorChannel(), {}, []
+    build = TaskRunner.build
+
+    def failing_second_build(self, task, q_start):
+        if task.name == "rest":
+            builds.append(q_start)
+            if len(builds) == 2:
+                raise InfeasibleTask('phase "rest": not feasible from this posture (test)')
+        return build(self, task, q_start)
+
+    monkeypatch.setattr(TaskRunner, "build", failing_second_build)
+
+    def at(tick):
+        if tick.t >= 0.12 and "start" not in answers:
+            answers["start"] = threading.Thread(
+                target=lambda: answers.setdefault("ok", channel.request("start", 30, task=str(tmp_path / "rest.toml"))))
+            answers["start"].start()
+        if "ok" in answers and "stop" not in answers:
+            answers["stop"] = tick.t
+        if "stop" in answers and tick.t >= answers["stop"] + 0.3 and "posted" not in answers:
+            answers["posted"] = channel.post("stop")
+
+    result, runner, record, _ = run(FileTask.load(str(tmp_path / "wave.toml")), operator=channel,
+                                    hooks=[Record(at=at)])
+    answers["start"].join(10)
+    assert len(builds) == 2 and not answers["ok"].ok
+    assert "not feasible from this posture" in answers["ok"].error
+    assert "the reference rests where it stopped" in answers["ok"].error
+    assert result.end == "stopped" and result.tripped is None and runner.task.name == "wave"
+    i = record.phases.index("rest")
+    assert "stop" in record.phases[:i]
+    q = np.array(record.q_des)
+    np.testing.assert_allclose(q[i:], np.broadcast_to(builds[1], q[i:].shape), atol=1e-9)  # at rest, there
+    steps = np.abs(np.diff(q, axis=0)).max(axis=1)
+    assert steps.max() < 2e-3, steps.max()  # [rad] per tick: no jump
+
+
 class RobotOff(Counting):
     """Reports its servos cut (a robot-side trip) for robot times in [0.3, 0.4) s."""
 
