@@ -130,6 +130,18 @@ def test_missing_column_and_nan_rows(capsys, tmp_path):
     assert out["data"]["dropped_rows"] == 3 and "dropped 3 of 3000 rows" in out["data"]["notes"][0]
 
 
+def test_a_joint_that_never_moved_is_cannot_tell_with_its_fit_shown_as_not_available(capsys, tmp_path):
+    """q and q_des constant (the servo error is zero everywhere, its fit percentage undefined): the diagnosis
+    says it cannot tell, and the text output prints the fit as n/a."""
+    cols = synthetic_table(seconds=3.0)
+    cols.pop("dq")
+    cols["q"] = cols["q_des"] = np.full_like(cols["q"], 0.1)
+    path = write_table(cols, tmp_path / "still.csv")
+    assert main(["model", "diagnose", str(path), "--quiet", "--effects", "coulomb,delay"]) == 0
+    out = capsys.readouterr().out
+    assert "fit n/a" in out and "verdict: cannot_tell: cannot tell which effect: the position never changes" in out
+
+
 def _friction_csvs(tmp_path, k=3):
     """``k`` recordings of one joint's friction torque [N m] = 0.2 + 1.5 sign(v) + 3 v + noise (no torque)."""
     return [str(write_table(friction_recording(i, seconds=4.0, f0=0.25), tmp_path / f"rec{i}.csv")) for i in range(k)]

@@ -152,6 +152,8 @@ def _ridge(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     scale[scale == 0] = 1.0
     an = a / scale
     g = an.T @ an
+    if not np.trace(g) > 0:  # every column is zero (e.g. the residual of a log whose error never moves)
+        return np.zeros(a.shape[1])
     g[np.diag_indices_from(g)] += 1e-6 * np.trace(g) / len(g)
     return np.linalg.solve(g, an.T @ b) / scale
 

@@ -356,13 +356,18 @@ def _rerun(target: str, ds, comparison, diagnosis, ladder, unit) -> None:
     log_to_rerun(rec, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder, unit=unit)
 
 
+def _percent(x: float | None, scale: float) -> str:
+    """``x * scale`` in percent, or "n/a" (the JSON's null: e.g. the fit of a target that never varies)."""
+    return "n/a" if x is None else f"{scale * x:.1f} %"
+
+
 def _print_human(out: dict, ladder, unit) -> None:
     print(f"model {out['model']}  (error: {unit.quantity} [{unit.symbol}])")
     for part in ("train", "heldout", "test"):
         m = out.get(part)
         if m:
-            print(f"  {part:8s} fit {m['fit_percent']:.1f} %  RMS {unit.show(m['rms'])}  "
-                  f"over-estimation {100 * m['overestimation_rate']:.1f} %")
+            print(f"  {part:8s} fit {_percent(m['fit_percent'], 1)}  RMS {unit.show(m['rms'])}  "
+                  f"over-estimation {_percent(m['overestimation_rate'], 100)}")
     if "verdict" in out:
         print(f"verdict: {out['verdict']}: {out['message']}")
         for i, c in enumerate(r for r in out["ranking"] if r["testable"]):
