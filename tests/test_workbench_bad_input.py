@@ -161,3 +161,13 @@ def test_constant_position_cannot_tell():
     assert d.verdict == "cannot_tell"
     assert d.message.startswith("cannot tell which effect: the position never changes")
     assert all(not c.testable for c in d.ranking)
+
+
+def test_a_command_logged_as_a_copy_of_the_position_cannot_tell():
+    """q_des == q on a moving joint (a logging slip): the servo error is zero everywhere, so nothing can be
+    named; the message says the target never changes."""
+    cols = _table(4.0)
+    cols["q_des"] = cols["q"].copy()
+    d = _diagnose(load_dataset(cols), ["coulomb", "delay"])
+    assert d.verdict == "cannot_tell"
+    assert d.message.startswith("cannot tell which effect: the target never changes (= 0)"), d.message

@@ -411,8 +411,12 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
     if exc.unit_doubts:
         verdict, message = "cannot_tell", ("cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts)
                                            + "); " + message)
-    if exc.faults:
-        verdict, message = "cannot_tell", "cannot tell which effect: " + "; ".join(exc.faults) + "; " + message
+    faults = list(exc.faults)
+    y = ds.target
+    if not faults and y.size and np.ptp(y) == 0.0:  # e.g. q_des logged as a copy of q
+        faults.append(f"the target never changes (= {y[0]:.6g}): there is no error to model")
+    if faults:
+        verdict, message = "cannot_tell", "cannot tell which effect: " + "; ".join(faults) + "; " + message
     return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0],
                      checks, then if verdict == "missing_effect" else None)
 
