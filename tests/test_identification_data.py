@@ -8,6 +8,7 @@ from servotau.errors import IdentificationError
 from servotau.identification.data import (
     blocked_folds,
     holdout_split,
+    read_table,
     resolve_roles,
     segments,
     shift,
@@ -96,3 +97,19 @@ def test_resolve_roles_of_a_servotau_log_and_of_a_single_joint_table():
     assert joint == "J" and roles == {"position": "q/J", "command": "q_des/J", "torque": "est/tau/J", "time": "t"}
     roles, joint = resolve_roles({"q": np.zeros(3), "q_des": np.zeros(3)}, None, None)
     assert joint is None and roles == {"position": "q", "command": "q_des"}
+
+
+def test_a_numeric_column_with_a_text_cell_reads_it_as_nan_and_says_so(tmp_path, caplog):
+    """One ``abc`` in a torque column of a CSV: the column is kept (the cell NaN, its row dropped later like any NaN
+    row) with a warning naming the column, the count and the first cell; a column of labels is not a signal."""
+    t = np.arange(6) * 1e-3
+    tau = [f"{x:.3f}" for x in np.sin(t)]
+    tau[3] = "abc"
+    rows = [f"{a:.3f},{b},run{i % 2}" for i, (a, b) in enumerate(zip(t, tau, strict=True))]
+    path = tmp_path / "log.csv"
+    path.write_text("t,tau,label\n" + "\n".join(rows) + "\n")
+    with caplog.at_level("WARNING"):
+        cols = read_table(path)
+    assert set(cols) == {"t", "tau"}
+    assert np.isnan(cols["tau"][3]) and np.isfinite(np.delete(cols["tau"], 3)).all()
+    assert "column 'tau': 1 of 6 cells are not numbers (first: data row 3 from 0, 'abc')" in caplog.text

@@ -11,12 +11,15 @@ Both identification paths read the project's Parquet logs; they keep their own r
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
 from servotau.errors import HalError, IdentificationError
+
+log = logging.getLogger(__name__)
 
 ROLES = ("target", "command", "position", "torque", "velocity", "acceleration", "time", "segment")
 
@@ -77,10 +80,33 @@ def table_columns(table: object) -> dict[str, np.ndarray]:
         try:
             arr = np.asarray(values, dtype=np.float64)
         except (TypeError, ValueError):
-            continue  # text columns (labels, notes) are not signals
+            arr = _mostly_numbers(str(name), values)
+            if arr is None:
+                continue  # text columns (labels, notes) are not signals
         if arr.ndim == 1:
             out[str(name)] = arr
     return out
+
+
+def _mostly_numbers(name: str, values) -> np.ndarray | None:
+    """A column of numbers with a few cells that are not (e.g. ``abc`` in one row of a torque column): those cells
+    read as NaN (the rows are then dropped, and counted, like other NaN rows) with a warning naming the column, how
+    many cells and the first one; None for a text column (at most half of its cells are numbers)."""
+    cells = np.asarray(values, dtype=object)
+    if cells.ndim != 1:
+        return None
+    arr = np.full(cells.size, np.nan)
+    bad = []
+    for i, v in enumerate(cells):
+        try:
+            arr[i] = float(v) if v is not None else np.nan
+        except (TypeError, ValueError):
+            bad.append(i)
+    if len(bad) * 2 >= cells.size:
+        return None
+    log.warning("column '%s': %d of %d cells are not numbers (first: data row %d from 0, %r): read as NaN, their "
+                "rows dropped", name, len(bad), cells.size, bad[0], cells[bad[0]])
+    return arr
 
 
 def servotau_joints(columns: Mapping[str, np.ndarray]) -> list[str]:
