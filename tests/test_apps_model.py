@@ -105,16 +105,37 @@ def test_plugin_effect_and_column_mapping(capsys, tmp_path):
         (["--map", "torque"], "--map 'torque': expected ROLE=COLUMN"),
         (["--base", "coulomb+magic"], "unknown effect 'magic'"),
         (["--effects", "cogging,magic"], "--effects: unknown effect(s) ['magic']"),
-        (["--folds", "1"], "--folds 1: expected at least 2"),
+        (["--folds", "1"], "--folds 1: expected 2 to 100"),
+        (["--folds", "1000"], "--folds 1000: expected 2 to 100"),
+        (["--rerun", "save:{log}"], "expected save:FILE.rrd"),
+        (["--rerun", "save:/nonexistent/x.rrd"], "folder /nonexistent does not exist"),
+        (["--report", "{log}"], "is a file: expected a folder"),
         (["--plugin", "/nonexistent.py"], "--plugin /nonexistent.py: file not found"),
         (["--rerun", "nowhere"], "--rerun 'nowhere': expected save:FILE"),
     ],
 )
 def test_bad_input_is_a_clean_error(capsys, cogging_log, argv, message):
-    """Bad options and columns end with exit code 2 and a message naming the field, never a traceback."""
+    """Bad options and columns end with exit code 2 and a message naming the field, never a traceback; no output
+    replaces the log (``{log}``: the input's own path)."""
+    before = cogging_log.read_bytes()
+    argv = [a.format(log=cogging_log) for a in argv]
     assert main(["model", "diagnose", str(cogging_log), "--quiet", *argv]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+    assert cogging_log.read_bytes() == before
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--save", "{log}"], "is an input of this command: expected another file"),
+    (["--save", "{tmp}/missing/m.toml"], "missing does not exist: expected an existing folder"),
+    (["--max-steps", "0"], "--max-steps 0: expected at least 1"),
+])
+def test_add_refuses_bad_outputs_before_fitting(capsys, cogging_log, tmp_path, argv, message):
+    before = cogging_log.read_bytes()
+    argv = [a.format(log=cogging_log, tmp=tmp_path) for a in argv]
+    assert main(["model", "add", str(cogging_log), "--quiet", *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert cogging_log.read_bytes() == before and not (tmp_path / "missing").exists()
 
 
 def test_missing_column_and_nan_rows(capsys, tmp_path):

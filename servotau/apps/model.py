@@ -165,6 +165,36 @@ def _plugins(paths: list[str]) -> None:
             raise IdentificationError(f"--plugin {p}: failed ({type(exc).__name__}: {exc})") from exc
 
 
+MAX_FOLDS = 100  # held-out blocks: more leave blocks shorter than the filters and the guard bands around them
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse, before anything is read or fitted, an output that would overwrite an input or could not be written
+    (no folder is created but the report's own), and a count out of range."""
+    inputs = {Path(p).resolve() for p in [*args.log, *getattr(args, "test", []), getattr(args, "model", None)] if p}
+
+    def output(option: str, value: str, path: Path) -> None:
+        if path.resolve() in inputs:
+            raise IdentificationError(f"{option} {value}: is an input of this command: expected another file")
+        if path.is_dir():
+            raise IdentificationError(f"{option} {value}: is a folder: expected a file")
+        if not path.parent.is_dir():
+            raise IdentificationError(f"{option} {value}: folder {path.parent} does not exist: expected an existing "
+                                      "folder")
+
+    if args.rerun and args.rerun.startswith("save:"):
+        target = Path(args.rerun[len("save:"):])
+        if target.suffix != ".rrd":
+            raise IdentificationError(f"--rerun {args.rerun}: expected save:FILE.rrd (a Rerun recording)")
+        output("--rerun", args.rerun, target)
+    if getattr(args, "save", None):
+        output("--save", args.save, Path(args.save))
+    if args.report and Path(args.report).exists() and not Path(args.report).is_dir():
+        raise IdentificationError(f"--report {args.report}: is a file: expected a folder (created if missing)")
+    if getattr(args, "max_steps", 1) < 1:
+        raise IdentificationError(f"--max-steps {args.max_steps}: expected at least 1")
+
+
 def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
 
@@ -173,8 +203,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"[{time.perf_counter() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     _plugins(args.plugin)
-    if args.folds < 2:
-        raise IdentificationError(f"--folds {args.folds}: expected at least 2")
+    if not 2 <= args.folds <= MAX_FOLDS:
+        raise IdentificationError(f"--folds {args.folds}: expected 2 to {MAX_FOLDS}")
+    _check_options(args)
     loss = Loss.asymmetric(args.w) if args.loss == "asymmetric" else Loss.least_squares()
     dead_band = getattr(args, "dead_band", None)
     if dead_band and not args.save:
