@@ -15,12 +15,16 @@ from servotau.errors import IdentificationError
 LOSS_KINDS = ("least_squares", "asymmetric")
 
 
+MAX_WEIGHT = 1e6  # beyond, the weighted normal equations lose every digit of the under-estimating samples
+
+
 def check_weight(w: object) -> float:
-    """Return the asymmetric weight ``w`` as a float, or raise unless it is a finite number > 1."""
-    if isinstance(w, bool) or not isinstance(w, (int, float, np.floating, np.integer)) or not math.isfinite(w):
+    """Return the asymmetric weight ``w`` as a float, or raise unless it is a number in (1, :data:`MAX_WEIGHT`]."""
+    if isinstance(w, bool) or not isinstance(w, (int, float, np.floating, np.integer)) or not math.isfinite(w) \
+            or w <= 1.0:
         raise IdentificationError(f"w = {w!r}: expected a finite number > 1 (over-estimation weight)")
-    if w <= 1.0:
-        raise IdentificationError(f"w = {w!r}: expected a finite number > 1 (over-estimation weight)")
+    if w > MAX_WEIGHT:
+        raise IdentificationError(f"w = {w!r}: expected at most {MAX_WEIGHT:g} (over-estimation weight)")
     return float(w)
 
 

@@ -13,7 +13,7 @@ Common options: --map ROLE=COLUMN (column roles for other tables), --unit U (the
 role does not say it: a servo log's error is in rad, a torque or friction target in N m),
 --offset auto|on|off (a constant term in the base; auto: on unless the target is a servo error),
 --loss least_squares|asymmetric with --w, --folds, --plugin FILE.py (registers user effects), --report DIR (HTML + PNG),
---rerun save:FILE|connect:ADDR|spawn, --json (one JSON object on stdout). Progress goes to stderr.
+--rerun save:FILE.rrd|connect:ADDR|spawn, --json (one JSON object on stdout). Progress goes to stderr.
 """
 
 from __future__ import annotations
@@ -122,7 +122,7 @@ def _common(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--plugin", action="append", default=[], metavar="FILE.py",
                     help="Python file that registers user effects (register_effect)")
     sp.add_argument("--report", metavar="DIR", help="write an HTML report with PNG plots into DIR")
-    sp.add_argument("--rerun", metavar="TARGET", help="save:FILE, connect:ADDR or spawn")
+    sp.add_argument("--rerun", metavar="TARGET", help="save:FILE.rrd, connect:ADDR or spawn")
     sp.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     sp.add_argument("--quiet", action="store_true", help="no progress on stderr")
     add_config_args(sp, ESTIMATION)  # the off-line estimator of a servotau log without an estimate
