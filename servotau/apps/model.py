@@ -191,6 +191,8 @@ def _check_options(args: argparse.Namespace) -> None:
         output("--save", args.save, Path(args.save))
     if args.report and Path(args.report).exists() and not Path(args.report).is_dir():
         raise IdentificationError(f"--report {args.report}: is a file: expected a folder (created if missing)")
+    if not 2 <= args.folds <= MAX_FOLDS:
+        raise IdentificationError(f"--folds {args.folds}: expected 2 to {MAX_FOLDS}")
     if getattr(args, "max_steps", 1) < 1:
         raise IdentificationError(f"--max-steps {args.max_steps}: expected at least 1")
 
@@ -203,8 +205,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"[{time.perf_counter() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     _plugins(args.plugin)
-    if not 2 <= args.folds <= MAX_FOLDS:
-        raise IdentificationError(f"--folds {args.folds}: expected 2 to {MAX_FOLDS}")
     _check_options(args)
     loss = Loss.asymmetric(args.w) if args.loss == "asymmetric" else Loss.least_squares()
     dead_band = getattr(args, "dead_band", None)
