@@ -12,7 +12,16 @@ import numpy as np
 import pytest
 import zenoh
 from support.controller import run
-from support.hal import controller, endpoint, free_port, query_status, robot_server, robot_status, stop_process
+from support.hal import (
+    controller,
+    endpoint,
+    free_port,
+    query_status,
+    robot_server,
+    robot_status,
+    stop_process,
+    wait_until,
+)
 
 from servotau.hal import FirmwareState, InProcessBackend, LogReader, ZenohBackend, keys
 from servotau.hal.wire.protocol import HEADER, HEADER_SIZE, encode_command
@@ -151,9 +160,7 @@ def test_fuzzed_commands_are_never_applied(tmp_path):
         try:
             pub = s.keep(s.z.declare_publisher(keys("fake").command,
                                                congestion_control=zenoh.CongestionControl.BLOCK))
-            deadline = time.monotonic() + 30  # a safety net: the publisher finds the robot's subscriber first
-            while not pub.matching_status.matching and time.monotonic() < deadline:
-                time.sleep(0.01)
+            wait_until(lambda: pub.matching_status.matching, 30.0)  # the publisher finds the robot's subscriber
             for p in payloads:
                 pub.put(p)
             deadline = time.monotonic() + 60

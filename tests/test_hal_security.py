@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
-from support.hal import free_port, query_status
+from support.hal import free_port, query_status, wait_until
 
 from servotau.apps.certs import CONTROLLER_CN, make_certs
 from servotau.config import Section
@@ -63,9 +63,7 @@ def serving(config: ServerConfig):
 
 
 def _wait(predicate) -> None:
-    deadline = time.monotonic() + TIMEOUT
-    while not predicate() and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_until(predicate, TIMEOUT)
 
 
 def _raw_commands(session: Session, n: int, *, attachment: bytes | None = None, matched: bool = True) -> None:

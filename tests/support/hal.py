@@ -14,7 +14,8 @@ from pathlib import Path
 from servotau.apps.processes import free_port, stop_process, wait_ready
 from servotau.errors import HalError
 
-__all__ = ["ENV", "controller", "endpoint", "free_port", "robot_server", "robot_status", "stop_process"]
+__all__ = ["ENV", "controller", "endpoint", "free_port", "query_status", "robot_server", "robot_status", "stop_process",
+           "wait_until"]
 
 SUPPORT = Path(__file__).resolve().parent
 TESTS = SUPPORT.parent
@@ -82,6 +83,14 @@ def controller(port: int, *args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, str(SUPPORT / "controller.py"), "--connect", endpoint(port), *args],
                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=_die_with_parent)
+
+
+def wait_until(predicate, timeout: float) -> None:
+    """Poll ``predicate`` every 10 ms until it holds, for at most ``timeout`` [s] of wall time (a safety net: the
+    caller's assertions say what had to happen)."""
+    deadline = time.monotonic() + timeout
+    while not predicate() and time.monotonic() < deadline:
+        time.sleep(0.01)
 
 
 def query_status(session, robot: str = "fake", timeout: float = 10.0) -> dict | None:
