@@ -46,6 +46,16 @@ MAX_ERROR = math.pi  # [rad]
 """Half a turn: a position servo whose error passes it no longer holds a position (a compliant real servo under
 load reaches 1.3 rad: the measured Dynamixel XL330 pendulum logs, tests/data/xl330_pendulum)."""
 MAX_TORQUE = 1e3  # [N m] a torque beyond this is doubted to be in N m (mN m?)
+MAX_SPEED = 50.0  # [rad/s]
+"""A joint velocity beyond this is doubted to be in rad/s (deg/s?): faster than the fastest legged robots' joints
+(about 40 rad/s); a motor-side table faster than it needs its speed divided by the gear ratio."""
+MAX_PERIOD = 0.05  # [s]
+"""A sample period beyond this is doubted to be in s (ms, or a sample index?): 2.5 times the slowest period the
+workbench is built for (20 ms); no lag-like effect of a servo is resolved at a slower rate."""
+NOISY_POSITION = 0.5
+"""The position is mostly noise when its noise floor (:func:`noise_floor`) passes this fraction of its standard
+deviation: white noise, or a column that is not an angle (a smooth motion's floor is a few % of its spread even at
+a 20 ms period)."""
 
 
 @dataclass(frozen=True)
@@ -75,7 +85,7 @@ class Excitation:
         position_dense: Longest stretch [rad] of the positions sampled densely (:func:`position_coverage`; None
             without position).
         unit_doubts: Values implausible in the role's unit (:func:`unit_doubts`).
-        faults: What makes the log unfit to test any effect (a position that never changes).
+        faults: What makes the log unfit to test any effect (a position that never changes, or is mostly noise).
         velocity_noise: Noise floor of ``dq`` [rad/s] (:func:`noise_floor`).
         v_peak: Peak speed [rad/s] (``PEAK_QUANTILE`` of ``|dq|``).
         v_hold, v_move, v_fast: Thresholds of holding still, moving and fast motion [rad/s], from the two above.
@@ -172,11 +182,16 @@ def period_jitter(t: np.ndarray, period: float) -> tuple[float, float]:
     return 1.4826 * float(np.median(dev)), float(dev.max())
 
 
-def unit_doubts(q: np.ndarray | None, error: np.ndarray | None, tau: np.ndarray | None) -> list[str]:
+def unit_doubts(q: np.ndarray | None, error: np.ndarray | None, tau: np.ndarray | None, period: float | None = None,
+                dq: np.ndarray | None = None, torque_target: np.ndarray | None = None) -> list[str]:
     """Values implausible in the unit their role expects: a position ``q`` [rad] over ``TURNS`` turns, a servo
-    error ``q_des - q`` [rad] beyond ``MAX_ERROR``, a torque beyond ``MAX_TORQUE`` [N m] (each its 99th percentile
-    or range); each doubt names the value measured and the bound."""
+    error ``q_des - q`` [rad] beyond ``MAX_ERROR``, a torque ``tau`` or a torque target (a friction column) beyond
+    ``MAX_TORQUE`` [N m], a velocity ``dq`` beyond ``MAX_SPEED`` [rad/s] (each its 99th percentile or range), a
+    sample ``period`` beyond ``MAX_PERIOD`` [s]; each doubt names the value measured and the bound."""
     out = []
+    if period is not None and period > MAX_PERIOD:
+        out.append(f"the sample period is {period:.4g} s (more than {MAX_PERIOD:g} s): expected the time in [s]; "
+                   "milliseconds, or a sample index? (convert the column)")
     if q is not None and q.size and np.ptp(q) > TURNS * 2 * np.pi:
         out.append(f"the position spans {np.ptp(q):.4g} rad ({np.ptp(q) / (2 * np.pi):.3g} turns, more than "
                    f"{TURNS:g}): expected [rad]; degrees? (convert the column)")
@@ -185,12 +200,31 @@ def unit_doubts(q: np.ndarray | None, error: np.ndarray | None, tau: np.ndarray 
         if e > MAX_ERROR:
             out.append(f"the servo error q_des - q reaches {e:.4g} rad ({100 * PEAK_QUANTILE:.0f} % of |error|, "
                        f"more than {MAX_ERROR:g} rad): expected [rad]; degrees? (convert the columns)")
-    if tau is not None and tau.size:
-        m = float(np.quantile(np.abs(tau), PEAK_QUANTILE))
-        if m > MAX_TORQUE:
-            out.append(f"the torque reaches {m:.4g} ({100 * PEAK_QUANTILE:.0f} % of |tau|, more than {MAX_TORQUE:g} "
-                       "N m): expected [N m]; mN m? (convert the column)")
+    if dq is not None and dq.size:
+        v = float(np.quantile(np.abs(dq), PEAK_QUANTILE))
+        if v > MAX_SPEED:
+            out.append(f"the velocity reaches {v:.4g} rad/s ({100 * PEAK_QUANTILE:.0f} % of |dq|, more than "
+                       f"{MAX_SPEED:g} rad/s): expected [rad/s] at the joint; deg/s? (convert the column)")
+    for what, x in (("torque", tau), ("torque target", torque_target)):
+        if x is not None and x.size:
+            m = float(np.quantile(np.abs(x), PEAK_QUANTILE))
+            if m > MAX_TORQUE:
+                out.append(f"the {what} reaches {m:.4g} ({100 * PEAK_QUANTILE:.0f} % of its magnitude, more than "
+                           f"{MAX_TORQUE:g} N m): expected [N m]; mN m? (convert the column)")
     return out
+
+
+def position_noise_fault(q: np.ndarray | None) -> str | None:
+    """Why the position ``q`` [rad] is unfit to learn from when it is mostly noise (``NOISY_POSITION``); else None."""
+    if q is None or q.size < 3:
+        return None
+    spread = float(np.std(q))
+    floor = noise_floor(q)
+    if spread > 0 and floor > NOISY_POSITION * spread:
+        return (f"the position is mostly noise (its sample-to-sample noise floor {floor:.3g} rad is "
+                f"{100 * floor / spread:.0f} % of its standard deviation {spread:.3g} rad, more than "
+                f"{100 * NOISY_POSITION:.0f} %): not the joint's angle, or no motion to learn from")
+    return None
 
 
 POSITION_BINS = 100  # bins of the position range (its 1 % to 99 % quantiles) of position_coverage
@@ -241,9 +275,10 @@ def speed_thresholds(dq: np.ndarray) -> tuple[float, float, float, float, float]
     return noise, peak, v_hold, v_move, v_fast
 
 
-def excitation_report(signals: Signals) -> Excitation:
+def excitation_report(signals: Signals, torque_target: np.ndarray | None = None) -> Excitation:
     """What ``signals`` exercised (``dq`` required, ``tau`` / ``tau_raw`` / ``q`` / ``q_des`` / ``t`` used when
-    present; ``tau_raw`` is the unsmoothed torque whose noise floor sets the torque's hysteresis)."""
+    present; ``tau_raw`` is the unsmoothed torque whose noise floor sets the torque's hysteresis); a
+    ``torque_target`` [N m] (a friction column the model predicts) is checked for its unit too."""
     dq = np.asarray(signals["dq"], dtype=np.float64)
     n = len(dq)
     period = signals.dt
@@ -277,7 +312,11 @@ def excitation_report(signals: Signals) -> Excitation:
     gap, dense = (None, None) if q is None or q.size < 3 else position_coverage(q)
     jitter = period_jitter(signals["t"], period)[0] if period and "t" in signals else 0.0
     error = signals["q_des"] - q if q is not None and "q_des" in signals else None
-    doubts = unit_doubts(q, error, signals["tau_raw"] if "tau_raw" in signals else tau)
+    doubts = unit_doubts(q, error, signals["tau_raw"] if "tau_raw" in signals else tau, period, dq, torque_target)
+    if q is not None and q.size and np.ptp(q) == 0.0:
+        fault = f"the position never changes (= {q[0]:.6g} rad): the joint never moved"
+    else:
+        fault = position_noise_fault(q)
     return Excitation(
         duration=float(n * dt),
         n_samples=n,
@@ -304,8 +343,7 @@ def excitation_report(signals: Signals) -> Excitation:
         position_gap=gap,
         position_dense=dense,
         unit_doubts=tuple(doubts),
-        faults=(f"the position never changes (= {q[0]:.6g} rad): the joint never moved",)
-        if q is not None and q.size and np.ptp(q) == 0.0 else (),
+        faults=(fault,) if fault else (),
     )
 
 

@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .signals import Signals, delayed, per_run
+from .signals import Signals, delayed, run_bounds
 
 FRICTION_COEFFICIENT = (0.0, float("inf"))
 """Friction opposes the motion: its coefficient ``k_tau F >= 0`` (a negative one would push the joint along)."""
@@ -99,22 +99,28 @@ class OnlineState:
 
 def strokes(dq: np.ndarray, dt: float, starts: Sequence[int] | None = None) -> np.ndarray:
     """Travel [rad] between reversals of the motion (sign changes of ``dq`` beyond 5 % of its 95 % quantile of
-    the whole log), within each run (a stroke ends with its run)."""
+    the whole log), within each run (a stroke ends with its run; a run with fewer than two samples beyond that
+    has none), run by run."""
     v = np.quantile(np.abs(dq), 0.95) if len(dq) else 0.0
     if not v > 0:
         return np.zeros(0)
-    return per_run(lambda d: _strokes(d, dt, v), starts, dq)
-
-
-def _strokes(dq: np.ndarray, dt: float, v: float) -> np.ndarray:
     sign = np.where(dq > 0.05 * v, 1, np.where(dq < -0.05 * v, -1, 0))
+    bounds = np.asarray(run_bounds(len(dq), starts), dtype=np.intp).reshape(-1, 2)
     idx = np.flatnonzero(sign)
-    if idx.size < 2:
+    run = np.searchsorted(bounds[:, 0], idx, side="right") - 1  # the run of each signed sample
+    keep = np.bincount(run, minlength=len(bounds))[run] >= 2
+    idx, run = idx[keep], run[keep]
+    if idx.size == 0:
         return np.zeros(0)
+    new_run = np.concatenate([[True], run[1:] != run[:-1]])
+    reversal = ~new_run[1:] & (np.diff(sign[idx]) != 0)  # first sample of each new direction
+    first_runs = run[new_run]
+    edge_at = np.concatenate([idx[new_run], idx[1:][reversal], bounds[first_runs, 1]])
+    edge_run = np.concatenate([first_runs, run[1:][reversal], first_runs])
+    order = np.lexsort((edge_at, edge_run))  # each run's edges in time: its first signed sample, reversals, end
+    edge_at, edge_run = edge_at[order], edge_run[order]
     travel = np.concatenate([[0.0], np.cumsum(np.abs(dq) * dt)])
-    rev = idx[1:][np.diff(sign[idx]) != 0]  # first sample of each new direction
-    edges = np.concatenate([[idx[0]], rev, [len(dq)]])
-    return np.diff(travel[edges])
+    return np.diff(travel[edge_at])[edge_run[1:] == edge_run[:-1]]
 
 
 def x0_grid(s: Signals, max_shapes: int = X0_MAX_SHAPES) -> tuple[float, ...]:

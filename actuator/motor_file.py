@@ -98,14 +98,9 @@ class MotorParameters(Mapping[str, MotorModel]):
     def save_toml(self, path: str | Path, notes: Sequence[str] = ()) -> Path:
         """Write the file (format in the module docstring), ``notes`` as comment lines at its top; return its
         path."""
-        header = [
-            *notes,
-            "servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
-            "Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
-        ]
+        header = [*notes, *_FORMAT_LINES[:2]]
         if any(m.servo_issue() is not None for m in self.models.values()):  # a model for another use
-            header.append("A joint with 'target' and 'unit' U predicts that instead: k_tau [U/(N m)], "
-                          "k_v [U/(rad/s)], k_c, offset and rms [U]; a key left out is a term not in the model.")
+            header.append(_FORMAT_LINES[2])
         joints = {}
         for joint, m in self.models.items():
             table: dict = {} if m.is_servo_error else {"target": m.target, "unit": m.unit}
@@ -124,6 +119,19 @@ class MotorParameters(Mapping[str, MotorModel]):
         p.write_text(toml_dumps({"version": FORMAT_VERSION, "joints": joints}, header), encoding="utf-8")
         return p
 
+    @staticmethod
+    def notes_of(path: str | Path) -> list[str]:
+        """The comment lines at the top of the motor file ``path`` (its provenance, a user's remarks) but the
+        format's own, which :meth:`save_toml` writes: the ``notes`` to keep when the file is written again."""
+        out = []
+        for line in Path(path).read_text(encoding="utf-8").splitlines():
+            if not line.startswith("#"):
+                break
+            text = line[1:].strip()
+            if text and text not in _FORMAT_LINES:
+                out.append(text)
+        return out
+
     @classmethod
     def load_toml(cls, path: str | Path) -> MotorParameters:
         """Read and validate a file.
@@ -140,6 +148,14 @@ class MotorParameters(Mapping[str, MotorModel]):
         if not joints.keys():
             raise root.error("joints", {}, "at least one joint table")
         return cls({name: _load_model(joints.section(name)) for name in joints.keys()}, source=root.file)
+
+
+_FORMAT_LINES = (
+    "servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
+    "Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
+    "A joint with 'target' and 'unit' U predicts that instead: k_tau [U/(N m)], k_v [U/(rad/s)], k_c, offset and rms "
+    "[U]; a key left out is a term not in the model.",
+)  # the header lines save_toml writes after the notes
 
 
 def _load_model(sec: Section) -> MotorModel:

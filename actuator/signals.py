@@ -111,11 +111,11 @@ def check_starts(starts: Sequence[int] | None, n: int) -> tuple[int, ...]:
     """``starts`` as a tuple (``(0,)`` for None), checked: integers, strictly increasing, from 0, below ``n``."""
     if starts is None:
         return (0,)
-    out = tuple(int(k) for k in starts)
-    if not out or out[0] != 0 or any(b <= a for a, b in zip(out, out[1:], strict=False)) or (n > 0 and out[-1] >= n):
+    arr = np.asarray(starts).astype(np.int64)  # one pass for a log with thousands of runs
+    if not arr.size or arr[0] != 0 or np.any(np.diff(arr) <= 0) or (n > 0 and arr[-1] >= n):
         raise IdentificationError(f"starts = {list(starts)[:8]}: expected strictly increasing sample indices "
                                   f"from 0, below the {n} samples")
-    return out
+    return tuple(arr.tolist())
 
 
 def run_bounds(n: int, starts: Sequence[int] | None) -> list[tuple[int, int]]:
@@ -140,12 +140,19 @@ def ticks(seconds: float, dt: float) -> int:
     return max(1, int(round(seconds / dt)))
 
 
+def _run_edges(n: int, starts: Sequence[int] | None) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``n`` samples, the index of its run's first and last sample (runs begin at ``starts``)."""
+    bounds = np.asarray(run_bounds(n, starts), dtype=np.intp).reshape(-1, 2)
+    lengths = bounds[:, 1] - bounds[:, 0]
+    return np.repeat(bounds[:, 0], lengths), np.repeat(bounds[:, 1] - 1, lengths)
+
+
 def delayed(x: np.ndarray, n: int, starts: Sequence[int] | None = None) -> np.ndarray:
     """``x`` delayed by ``n`` samples, the first value of each run repeated before its start."""
-    if starts is not None and len(starts) > 1:
-        return per_run(lambda v: delayed(v, n), starts, x)
     if n <= 0:
         return x.copy()
+    if starts is not None and len(starts) > 1:  # one gather for every run (a log with thousands of gaps)
+        return x[np.maximum(np.arange(len(x)) - n, _run_edges(len(x), starts)[0])]
     if n >= len(x):
         return np.full_like(x, x[0])
     return np.concatenate([np.full(n, x[0]), x[:-n]])
@@ -154,7 +161,7 @@ def delayed(x: np.ndarray, n: int, starts: Sequence[int] | None = None) -> np.nd
 def advanced(x: np.ndarray, n: int, starts: Sequence[int] | None = None) -> np.ndarray:
     """``x`` read ``n`` samples ahead, the last value of each run repeated past its end."""
     if starts is not None and len(starts) > 1:
-        return per_run(lambda v: advanced(v, n), starts, x)
+        return x[np.minimum(np.arange(len(x)) + max(n, 0), _run_edges(len(x), starts)[1])]
     return np.concatenate([x[n:], np.full(min(n, len(x)), x[-1])])[:len(x)]
 
 
@@ -166,12 +173,17 @@ def lowpass_gain(time_constant: float, dt: float) -> float:
 def lowpass(x: np.ndarray, time_constant: float, dt: float, y0: float | None = None,
             starts: Sequence[int] | None = None) -> np.ndarray:
     """First-order lag ``y[k] = y[k-1] + a (x[k] - y[k-1])`` with ``y[-1] = y0`` (default ``x[0]``), restarted
-    the same way at each run's start."""
-    if starts is not None and len(starts) > 1:
-        return per_run(lambda v: lowpass(v, time_constant, dt, y0), starts, x)
+    the same way at each run's start (``y0`` default: the run's first sample)."""
     a = lowpass_gain(time_constant, dt)
-    y0 = float(x[0]) if y0 is None else y0
-    y, _ = lfilter([a], [1.0, -(1.0 - a)], x, zi=[(1.0 - a) * y0])
+    y, _ = lfilter([a], [1.0, -(1.0 - a)], x, zi=[(1.0 - a) * (float(x[0]) if y0 is None else y0)])
+    if starts is not None and len(starts) > 1:
+        # one filter over the whole log, then each later run's start corrected: the difference from the restarted
+        # filter decays as (1 - a)^(samples into the run)
+        first = _run_edges(len(x), starts)[0]
+        k = np.flatnonzero(first > 0)
+        s = first[k]
+        restart = x[s] if y0 is None else y0
+        y[k] -= (1.0 - a) ** (k - s + 1) * (y[s - 1] - restart)
     return y
 
 
@@ -182,12 +194,11 @@ def direction_latch(dq: np.ndarray, threshold: float, starts: Sequence[int] | No
 
 def sign_latch(x: np.ndarray, flag: np.ndarray, starts: Sequence[int] | None = None) -> np.ndarray:
     """Sign of ``x`` at the last sample of the run where ``flag`` is True (0 before the run's first)."""
-    if starts is not None and len(starts) > 1:
-        return per_run(sign_latch, starts, x, flag)
     idx = np.where(flag, np.arange(len(x)), -1)
     np.maximum.accumulate(idx, out=idx)
     out = np.sign(x[np.maximum(idx, 0)])
-    out[idx < 0] = 0.0
+    first = _run_edges(len(x), starts)[0] if starts is not None and len(starts) > 1 else 0
+    out[idx < first] = 0.0  # no flag yet in this run (the last one is in an earlier run, or none)
     return out
 
 

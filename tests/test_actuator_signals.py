@@ -4,10 +4,11 @@ run of the log."""
 import numpy as np
 import pytest
 
-from servotau.actuator.friction_state import state, steps
+from servotau.actuator.friction_state import state, steps, strokes
 from servotau.actuator.signals import (
     Signals,
     acceleration,
+    advanced,
     bell_of,
     command_lead,
     delayed,
@@ -87,6 +88,39 @@ def test_lowpass_restarts_from_its_initial_value_at_each_run():
     np.testing.assert_allclose(lowpass(x, 1e-3, 1e-3, starts=STARTS), [2, 1, 0.5, 4, 2, 1])
     np.testing.assert_allclose(lowpass(x, 1e-3, 1e-3, y0=0.0, starts=STARTS), [1, 0.5, 0.25, 2, 1, 0.5])
     np.testing.assert_allclose(lowpass(x, 1e-3, 1e-3), [2, 1, 0.5, 2.25, 1.125, 0.5625])
+
+
+def test_many_runs_give_what_each_run_alone_gives():
+    """A log with thousands of gaps (rows dropped for NaN) is filtered in one pass, not run by run: the result is
+    each run's own, from a loop over the runs with one-run calls (runs of 1 to 12 samples)."""
+    rng = np.random.default_rng(7)
+    lengths = rng.integers(1, 13, 800)
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    n = int(lengths.sum())
+    x = rng.normal(0, 1, n)
+    flag = rng.random(n) < 0.3
+
+    def each(f, *xs):
+        return np.concatenate([f(*(v[a:a + m] for v in xs)) for a, m in zip(starts, lengths, strict=True)])
+
+    for k in (1, 3, 20):
+        np.testing.assert_array_equal(delayed(x, k, starts), each(lambda v: delayed(v, k), x))
+        np.testing.assert_array_equal(advanced(x, k, starts), each(lambda v: advanced(v, k), x))
+    np.testing.assert_array_equal(sign_latch(x, flag, starts), each(sign_latch, x, flag))
+    for tc, y0 in ((1e-3, None), (0.05, None), (0.05, 0.3)):
+        np.testing.assert_allclose(lowpass(x, tc, 1e-3, y0, starts), each(lambda v: lowpass(v, tc, 1e-3, y0), x),
+                                   rtol=0, atol=1e-12)
+    v = 0.05 * np.quantile(np.abs(x), 0.95)
+
+    def run_strokes(d):  # travel from the run's first move to each reversal, and from the last one to its end
+        moves = np.flatnonzero(np.abs(d) > v)
+        if moves.size < 2:
+            return np.zeros(0)
+        flips = [k for a, k in zip(moves, moves[1:], strict=False) if np.sign(d[a]) != np.sign(d[k])]
+        edges = [moves[0], *flips, len(d)]
+        return np.array([np.abs(d[a:b]).sum() * 1e-3 for a, b in zip(edges, edges[1:], strict=False)])
+
+    np.testing.assert_allclose(strokes(x, 1e-3, starts), each(run_strokes, x), rtol=1e-9)
 
 
 def test_latches_onsets_and_the_hysteresis_detector_start_afresh_in_each_run():

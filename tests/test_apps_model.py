@@ -112,6 +112,11 @@ def test_plugin_effect_and_column_mapping(capsys, tmp_path):
         (["--report", "{log}"], "is a file: expected a folder"),
         (["--plugin", "/nonexistent.py"], "--plugin /nonexistent.py: file not found"),
         (["--rerun", "nowhere"], "--rerun 'nowhere': expected save:FILE"),
+        (["--map", "torque=tau", "--map", "torque=q"], "role torque is already mapped to column 'tau'"),
+        (["--align-torque", "-1"], "--align-torque -1.0: expected a search range >= 0 s"),
+        (["--align-torque", "nan"], "--align-torque nan: expected a search range >= 0 s"),
+        (["--test", "{log}"], "cog.parquet: the same file as log "),
+        (["--unit", "mrad"], "--unit mrad: the target of"),
     ],
 )
 def test_bad_input_is_a_clean_error(capsys, cogging_log, argv, message):
@@ -123,6 +128,13 @@ def test_bad_input_is_a_clean_error(capsys, cogging_log, argv, message):
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert cogging_log.read_bytes() == before
+
+
+def test_the_same_recording_twice_is_refused(capsys, cogging_log):
+    """Two names of one file would count as two recordings, one held out against its own copy."""
+    assert main(["model", "diagnose", str(cogging_log), str(cogging_log.parent / ".." / cogging_log.parent.name
+                                                              / cogging_log.name), "--quiet"]) == 2
+    assert f"the same file as log {cogging_log}: expected each recording once" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(("argv", "message"), [
@@ -211,3 +223,14 @@ def test_a_servo_model_without_k_tau_is_saved_and_reloaded(capsys, tmp_path):
     assert main(["model", "compare", a, "--map", "time=t", "--map", "velocity=v", "--map", "target=friction",
                  "--base", "k_tau+coulomb", "--quiet"]) == 2
     assert "['k_tau'] named, but the log has no torque" in capsys.readouterr().err
+
+
+def test_simulate_refuses_an_unknown_output_format_before_simulating(capsys, tmp_path, monkeypatch):
+    from servotau.apps import simlog
+
+    def no_simulation(*args, **kwargs):
+        raise AssertionError("simulated before the output was checked")
+
+    monkeypatch.setattr(simlog, "simulate_log", no_simulation)
+    assert main(["model", "simulate", str(tmp_path / "x.txt"), "--quiet"]) == 2
+    assert "unknown format '.txt': expected .parquet or .csv" in capsys.readouterr().err

@@ -113,3 +113,29 @@ def test_a_numeric_column_with_a_text_cell_reads_it_as_nan_and_says_so(tmp_path,
     assert set(cols) == {"t", "tau"}
     assert np.isnan(cols["tau"][3]) and np.isfinite(np.delete(cols["tau"], 3)).all()
     assert "column 'tau': 1 of 6 cells are not numbers (first: data row 3 from 0, 'abc')" in caplog.text
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_a_csv_with_semicolons_or_tabs_reads_like_one_with_commas(tmp_path, sep):
+    path = tmp_path / "log.csv"
+    path.write_text(sep.join(["t", "q", "label"]) + "\n" + "\n".join(sep.join([f"{i * 1e-3}", f"{0.1 * i}", "a"])
+                                                                     for i in range(5)) + "\n")
+    cols = read_table(path)
+    assert set(cols) == {"t", "q"} and np.allclose(cols["q"], 0.1 * np.arange(5))
+
+
+def test_decimal_commas_are_refused_naming_the_column(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_text("t;tau\n0;1,5\n0,001;2,25\n")
+    with pytest.raises(IdentificationError, match="column 't' holds '0,001', a number with a decimal comma: expected "
+                                                  "decimal points"):
+        read_table(path)
+
+
+def test_a_binary_file_named_csv_is_refused_without_echoing_it(tmp_path):
+    path = tmp_path / "log.csv"
+    junk = bytes(range(256)) * 20
+    path.write_bytes(junk)
+    with pytest.raises(IdentificationError, match=r"binary content \(byte 128 is not UTF-8 text\)") as err:
+        read_table(path)
+    assert len(str(err.value)) < 300

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support.synthetic import K_TAU, synthetic_table
+from support.synthetic import K_TAU, friction_recording, synthetic_table
 
 from servotau.actuator import excitation_report, get_effect
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
@@ -144,6 +144,54 @@ def test_torque_in_millinewton_metres_cannot_tell():
     assert "mN m?" in _note(ds, "units:")
     d = _diagnose(ds, ["coulomb"])
     assert d.verdict == "cannot_tell" and "mN m?" in d.message
+
+
+def test_time_in_milliseconds_cannot_tell():
+    """A time column in ms (or a sample index) makes a 1 ms log look like one sampled every second: the velocities
+    are then 1000 times too small, and a friction fitted to them would be named with a wrong shape."""
+    cols = _table()
+    ds = load_dataset({**cols, "t": 1e3 * cols["t"]})
+    assert "milliseconds" in _note(ds, "units:")
+    d = _diagnose(ds)
+    assert d.verdict == "cannot_tell" and "the sample period is 1 s" in d.message
+    assert all(not c.testable for c in d.ranking)
+
+
+def test_friction_table_in_millinewton_metres_and_degrees_per_second_cannot_tell():
+    cols = friction_recording(0, seconds=8.0, f0=0.3)
+    roles = {"target": "friction", "velocity": "v", "time": "t"}
+    plain = _diagnose(load_dataset(cols, roles=roles), ["coulomb"])
+    assert plain.verdict == "missing_effect" and not plain.excitation.unit_doubts  # the SI table is named
+    other = load_dataset({**cols, "v": np.degrees(25.0 * cols["v"]), "friction": 1e3 * cols["friction"]},
+                         roles=roles)
+    d = _diagnose(other, ["coulomb"])
+    assert d.verdict == "cannot_tell"
+    assert "deg/s?" in d.message and "the torque target reaches" in d.message and "mN m?" in d.message
+
+
+def test_position_that_is_noise_cannot_tell():
+    """A position column of white noise (a wrong column, or a joint that only jitters): the servo error then holds
+    the command's own noise, which a delay term (q_des now minus q_des before) fits without any physics."""
+    rng = np.random.default_rng(3)
+    cols = _table(4.0)
+    cols.pop("dq")
+    n = len(cols["t"])
+    cols.update(q=rng.normal(0, 0.1, n), q_des=rng.normal(0, 0.1, n), tau=rng.normal(0, 5, n))
+    d = _diagnose(load_dataset(cols))
+    assert d.verdict == "cannot_tell" and "the position is mostly noise" in d.message
+    assert all(not c.testable for c in d.ranking)
+
+
+def test_one_way_motion_with_a_constant_error_says_rerun_with_the_offset():
+    """A joint turning one way: Coulomb friction is a constant error there. A function of the position (cogging)
+    fits part of it as the position follows time, and a free function of the velocity most of it; neither is
+    named, and the message says to rerun with the offset."""
+    ds = load_dataset(_table(reversals=False))
+    d = _diagnose(ds, ["coulomb", "cogging"])
+    assert d.verdict == "cannot_tell" and "--offset on" in d.message
+    assert not d.candidate("cogging").testable or d.candidate("cogging").heldout_gain < d.min_gain
+    with_offset = diagnose(ds, parse_spec("paper+offset", ds.signals), effects=["coulomb", "cogging"])
+    assert with_offset.verdict == "no_missing_effect"
 
 
 def test_plausible_log_has_no_unit_note():

@@ -43,8 +43,36 @@ def open_log(path: str | Path):
         raise IdentificationError(f"{path}: not a Parquet log ({type(exc).__name__}: {exc})") from exc
 
 
+DELIMITERS = (",", ";", "\t")
+"""CSV delimiters: the first of these the header line holds separates the columns."""
+SNIFF_BYTES = 65536  # [bytes] read to check a CSV file is text and find its header line
+
+
+def _csv_delimiter(p: Path) -> str:
+    """The delimiter of the CSV file ``p`` (``DELIMITERS``, from its header line; ``,`` for one column).
+
+    Raises:
+        IdentificationError: The file's start is not UTF-8 text (a binary file named .csv).
+    """
+    with p.open("rb") as f:
+        head = f.read(SNIFF_BYTES)
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 3:  # not a multi-byte character cut at the end of the sniffed bytes
+            raise IdentificationError(f"log file {p}: binary content (byte {exc.start} is not UTF-8 text): expected "
+                                      "a CSV table (text) or a .parquet file") from None
+        text = head[:exc.start].decode("utf-8")
+    if "\x00" in text:
+        raise IdentificationError(f"log file {p}: binary content (a NUL byte at {text.index(chr(0))}): expected a CSV "
+                                  "table (text) or a .parquet file")
+    header = text.lstrip("\ufeff").splitlines()[0] if text.strip() else ""
+    return next((d for d in DELIMITERS if d in header), ",")
+
+
 def read_table(path: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a Parquet or CSV file as float arrays (non-numeric columns are skipped)."""
+    """Columns of a Parquet or CSV file as float arrays (non-numeric columns are skipped). A CSV file's delimiter
+    is a comma, a semicolon or a tab (:func:`_csv_delimiter`); its decimals are points."""
     p = Path(path)
     if not p.exists():
         raise IdentificationError(f"log file {p}: not found: expected a Parquet or CSV file")
@@ -57,14 +85,34 @@ def read_table(path: str | Path) -> dict[str, np.ndarray]:
         elif suffix in (".csv", ".txt"):
             import pyarrow.csv as pcsv
 
-            table = pcsv.read_csv(p)
+            delimiter = _csv_delimiter(p)
+            table = pcsv.read_csv(p, parse_options=pcsv.ParseOptions(delimiter=delimiter))
+            _no_decimal_commas(p, table, delimiter)
         else:
             raise IdentificationError(f"log file {p}: unknown format '{suffix}': expected .parquet or .csv")
     except IdentificationError:
         raise
     except Exception as exc:  # pyarrow raises many types for unreadable files
-        raise IdentificationError(f"log file {p}: cannot be read ({exc}): expected a Parquet or CSV table") from exc
+        why = str(exc).encode("ascii", "backslashreplace").decode()[:300]
+        raise IdentificationError(f"log file {p}: cannot be read ({why}): expected a Parquet or CSV table") from exc
     return table_columns(table)
+
+
+def _no_decimal_commas(p: Path, table, delimiter: str) -> None:
+    """Refuse a CSV table whose numbers are written with decimal commas (``8,879``: a locale's export) rather than
+    read them as text columns and report them missing."""
+    if delimiter == ",":
+        return
+    import pyarrow as pa
+
+    for name in table.column_names:
+        col = table.column(name)
+        if not pa.types.is_string(col.type) or len(col) == 0:
+            continue
+        cell = next((c for c in col.to_pylist()[:100] if c and "," in c), None)
+        if cell is not None and cell.replace(",", ".", 1).lstrip("+-").replace(".", "", 1).isdigit():
+            raise IdentificationError(f"log file {p}: column '{name}' holds {cell!r}, a number with a decimal comma: "
+                                      "expected decimal points (export the table with '.' as the decimal separator)")
 
 
 def table_columns(table: object) -> dict[str, np.ndarray]:

@@ -25,14 +25,17 @@ from .filters import differentiate
 from .model import ModelSpec
 from .probes import base_per_fold, heldout_prediction
 
-__all__ = ["CHECK_ORDER_STEP", "DIFFERENTIATION", "SMOOTHING", "constant_error", "derivative_checks",
-           "faster_derivative", "offset_spec", "preprocessing_checks", "smoothing_check", "with_derivatives"]
+__all__ = ["CHECK_ORDER_STEP", "CONSTANT_ERROR", "DIFFERENTIATION", "OFFSET_ADVICE", "SMOOTHING", "constant_error",
+           "derivative_checks", "faster_derivative", "offset_spec", "preprocessing_checks", "smoothing_check",
+           "with_derivatives"]
 
 CHECK_ORDER_STEP = 2  # the higher-order check's polynomial order over the velocity's own: a centred first
 # derivative's coefficients agree for orders 2k - 1 and 2k (order 2 -> 4: a cubic's derivative; 4 -> 6: a quintic's)
 SMOOTH_CHECK_ORDER = 4  # polynomial order of the torque's check (smoothing_check)
 DIFFERENTIATION = "the differentiation's error"  # the cause a derivative check gives
 SMOOTHING = "the torque smoothing's error"  # the cause the smoothing check gives
+CONSTANT_ERROR = "a constant error"  # the cause the offset check gives (the message's --offset advice looks for it)
+OFFSET_ADVICE = "rerun the diagnosis with --offset on"  # in every message that finds a constant error the model lacks
 FAST_MIN_WINDOW = 3  # [samples] shortest window of faster_derivative (order 2 over 3 samples: the central difference)
 
 
@@ -148,8 +151,8 @@ def constant_error(ds: Dataset, spec: ModelSpec, loss: Loss, folds: list[Fold], 
     if not gain >= min_gain:
         return ()
     return (f"a constant error: an offset in the model, which it lacks, removes {100 * gain:.0f} % of the held-out "
-            "error (an encoder's zero, or a dead zone or friction under a load that never reverses): rerun the "
-            "diagnosis with --offset on (a motor model for control takes no offset)",)
+            "error (an encoder's zero, or a dead zone or friction under a load that never reverses): "
+            f"{OFFSET_ADVICE} (a motor model for control takes no offset)",)
 
 
 def preprocessing_checks(ds: Dataset) -> list[tuple[Dataset, str, str]]:

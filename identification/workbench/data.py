@@ -36,20 +36,22 @@ the median period) and the note gives the jitter measured (robust spread of the 
 named; a constant torque, velocity or acceleration carries no information and is not used (the velocity is then
 differentiated from ``q``). Values implausible in the unit the role expects
 (:func:`~servotau.actuator.excitation.unit_doubts`:
-a position over several turns, a servo error over a radian, a torque over kN m) are noted; the diagnosis then
-cannot tell the effects that read them.
+a position over several turns, a servo error over half a turn, a torque or friction target over kN m, a velocity
+over 50 rad/s, a sample period over 50 ms) are noted; the diagnosis then cannot tell the effects that read them
+(:func:`excitation_of`).
 """
 
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from servotau.actuator.excitation import JITTER_TOL, period_jitter, unit_doubts
+from servotau.actuator.excitation import JITTER_TOL, Excitation, excitation_report, period_jitter, unit_doubts
 from servotau.actuator.signals import Signals, per_run
 from servotau.errors import IdentificationError
 
@@ -58,13 +60,15 @@ from ..data.tables import servotau_joints
 from .filters import cv_derivative, cv_window, differentiate
 from .resolution import encoder_resolution, quantisation_floor
 
-__all__ = ["MIN_SAMPLES", "OFFLINE_ESTIMATE", "Dataset", "FilterPart", "align_torque", "describe", "load_dataset",
-           "windows_text"]
+__all__ = ["MIN_SAMPLES", "OFFLINE_ESTIMATE", "TORQUE_COLUMN", "Dataset", "FilterPart", "align_torque", "describe",
+           "excitation_of", "load_dataset", "windows_text"]
 
 log = logging.getLogger(__name__)
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
 PERIOD_JUMPS = 0.05  # fraction of long time steps beyond which the period jumps (the log is resampled)
+TORQUE_COLUMN = re.compile(r"tau|torque|friction|effort|trq", re.IGNORECASE)
+"""A target column whose name matches holds a torque or friction [N m]; any other target's unit is the user's."""
 RUN_GAP = 1.5  # [periods] a longer time step ends a run of samples (filters do not cross it)
 _SIGNAL_OF_ROLE = {"position": "q", "command": "q_des", "torque": "tau", "velocity": "dq", "acceleration": "ddq",
                    "time": "t"}
@@ -296,12 +300,26 @@ def load_dataset(
             sig[col] = arr[valid]
     n = int(valid.sum())
     segment = used["segment"][valid] if "segment" in roles else None
-    for doubt in unit_doubts(sig.get("q"), target if "command" in roles else None, sig.get("tau_raw", sig.get("tau"))):
+    torque = target if _torque_column(roles.get("target")) else None
+    for doubt in unit_doubts(sig.get("q"), target if "command" in roles else None, sig.get("tau_raw", sig.get("tau")),
+                             dt, sig.get("dq"), torque):
         notes.append(f"units: {doubt}")
         log.warning("%s: %s", name, doubt)
     starts = np.searchsorted(np.flatnonzero(valid), [a for a, _ in runs])  # the runs, in rows kept
     return Dataset(Signals(sig, dt, n, starts=starts), target, segment, roles, name, joint, n_dropped, tuple(notes),
                    prep)
+
+
+def _torque_column(column: str | None) -> bool:
+    """The target column ``column`` holds a torque or a friction [N m] (by its name, ``TORQUE_COLUMN``)."""
+    return column is not None and TORQUE_COLUMN.search(column) is not None
+
+
+def excitation_of(ds: Dataset) -> Excitation:
+    """What the log ``ds`` exercised (:func:`~servotau.actuator.excitation_report`), its torque or friction target
+    checked for its unit too."""
+    torque = ds.target if not ds.actuator and _torque_column(ds.roles.get("target")) else None
+    return excitation_report(ds.signals, torque)
 
 
 def windows_text(windows: list[int]) -> str:

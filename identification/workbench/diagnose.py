@@ -39,6 +39,7 @@ stiction) is re-scored with the less biased velocities too: it can fit the deriv
 motion bends (``CHECKED``).
 On a servo-error log whose model has no constant offset, such an effect is also re-scored with one: a constant
 error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``, and lag-like terms fit the bias
+(as does a function of the position, family ``position``, on a joint turning one way)
 ("cannot tell: may be a constant error"; the message says to rerun with the offset). Whatever the verdict, the
 message says what an offset alone would remove when that is at least ``min_gain`` (:func:`~.checks.constant_error`),
 unless a lag-like effect already lost its gain to the offset (the message then says to add it).
@@ -68,20 +69,29 @@ from dataclasses import replace
 
 import numpy as np
 
-from servotau.actuator import Effect, Loss, excitation_report, resolve_effects
+from servotau.actuator import Effect, Loss, resolve_effects
 from servotau.actuator.excitation import units_plausible
 from servotau.actuator.terms import K_TAU
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold, folds_of
-from .checks import DIFFERENTIATION, SMOOTHING, constant_error, offset_spec, preprocessing_checks
-from .data import Dataset
+from .checks import (
+    CONSTANT_ERROR,
+    DIFFERENTIATION,
+    OFFSET_ADVICE,
+    SMOOTHING,
+    constant_error,
+    offset_spec,
+    preprocessing_checks,
+)
+from .data import Dataset, excitation_of
 from .evaluate import compare, error_of
 from .gram import Normal, loss_of, near_ties
 from .model import FittedModel, ModelSpec, Term, effect_columns, fit_spec, resolve_shapes, solve, solve_gram
 from .probes import FoldBase, base_per_fold, heldout_prediction, probe_gains
 from .resolution import error_floor, probes_within_resolution, removed_error, within_resolution
 from .verdict import (
+    OFFSET_PROBE,
     Candidate,
     Confusion,
     Diagnosis,
@@ -107,13 +117,14 @@ REMAINING = 0.05
 """Held-out gain of the named effect's family probe, on the model with the effect, that flags it *partial*
 (when it is also at least a quarter of the effect's own gain)."""
 
-CONSTANT_ERROR = "a constant error"  # the cause the offset check gives (the message's --offset advice looks for it)
 
-CHECKED = {"dynamics": (DIFFERENTIATION, SMOOTHING, CONSTANT_ERROR), "velocity": (DIFFERENTIATION,)}
+CHECKED = {"dynamics": (DIFFERENTIATION, SMOOTHING, CONSTANT_ERROR), "velocity": (DIFFERENTIATION,),
+           "position": (CONSTANT_ERROR,)}
 """The checks an effect of each family must survive to be named (:func:`_checked`). Lag-like effects fit the
 derivative's and the smoothing's lag and a constant error; functions of the velocity (friction) fit the derivative's
 amplitude error where the motion bends (an order-2 derivative's window spans the servo's transients at coarse
-sample periods)."""
+sample periods); a function of the position (cogging) fits part of a constant error where the joint turns one way
+(the position then follows time)."""
 
 _LS = Loss.least_squares()
 
@@ -261,7 +272,7 @@ def diagnose(
     spec = resolve_shapes(ds.signals, ds.target, spec, loss, cache)
     base = compare(ds, spec, loss, folds=folds, cache=cache)
     y = ds.target
-    exc = excitation_report(ds.signals)
+    exc = excitation_of(ds)
     bases = base_per_fold(ds, spec, loss, folds, cache)
     base_pred = heldout_prediction(bases, ds.n)
     e0 = error_of(y - base_pred, y, loss)
@@ -326,14 +337,15 @@ def diagnose(
             ranking[0] = replace(top, remaining=rem, partial=partial)
         except IdentificationError:
             pass
+    probes, floored = probes_within_resolution(ds, probes, e0, loss, coefs)  # then rechecked: the floored are 0
     probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
-    probes, floored = probes_within_resolution(ds, probes, e0, loss, coefs)
     checks += floored + apart
     constant = [c.effect for c in ranking if c.reason and CONSTANT_ERROR in c.reason]
     if constant:
-        checks += (f"{', '.join(constant)} lose their gain with a constant offset in the model, which it lacks: "
-                   "rerun the diagnosis with --offset on (an encoder's zero, or a dead zone under a load of one "
-                   "sign; a motor model for control takes no offset)",)
+        verb = "loses its" if len(constant) == 1 else "lose their"
+        checks += (f"{', '.join(constant)} {verb} gain with a constant offset in the model, which it lacks: "
+                   f"{OFFSET_ADVICE} (an encoder's zero, or a dead zone under a load of one sign; a motor model for "
+                   "control takes no offset)",)
     else:
         checks += constant_error(ds, spec, loss, folds, e0, min_gain, cache)
     d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
@@ -397,7 +409,8 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
     and, on a servo-error log whose model has no constant offset, with one (a
     constant error, e.g. an encoder's zero or a dead zone under a load of one sign, biases ``k_tau``, and lag-like
     terms fit the bias). A function of the velocity (family ``velocity``) is checked with the less biased
-    derivatives only (``CHECKED``). Otherwise it is untestable, saying why, and the next one is considered.
+    derivatives only, a function of the position (family ``position``) with the offset only (``CHECKED``).
+    Otherwise it is untestable, saying why, and the next one is considered.
     Friction-like effects are not checked against the offset: a dead zone under a load of mostly one sign, or an
     asymmetric Coulomb friction on a joint that rarely rests, is partly a constant and still physical."""
     preprocessed = None  # the log with less biased preprocessing (checks.preprocessing_checks), built on first need
@@ -408,10 +421,11 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
         if not causes:
             break
         top = ranking[i]
-        preprocessed = preprocessing_checks(ds) if preprocessed is None else preprocessed
-        alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in preprocessed if cause in causes]
+        if preprocessed is None and {DIFFERENTIATION, SMOOTHING} & set(causes):
+            preprocessed = preprocessing_checks(ds)
+        alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in preprocessed or () if cause in causes]
         if offset is not None and CONSTANT_ERROR in causes:
-            alternatives.append((ds, offset, "with a constant offset in the model, which it lacks (--offset on)",
+            alternatives.append((ds, offset, f"{OFFSET_PROBE} (--offset on)",
                                  CONSTANT_ERROR))
         if not alternatives:
             break

@@ -188,8 +188,8 @@ def save_model(
 ) -> Path:
     """Write the model of ``target`` in ``unit`` (the dataset's, e.g. from
     :func:`~servotau.identification.workbench.units.unit_of`: ``quantity`` and ``si``) into the motor-parameter
-    file ``path`` under ``joint`` (other joints of an existing file are kept). Terms not in the model (``k_tau``
-    of a table without torque) are left out of the file; an ``offset`` is saved.
+    file ``path`` under ``joint`` (other joints of an existing file, and its comment lines, are kept). Terms not in
+    the model (``k_tau`` of a table without torque) are left out of the file; an ``offset`` is saved.
 
     ``dead_band_log``: a servotau log whose holds give the joint's ``deadzone`` term instead of the fitted one
     (:func:`~servotau.identification.deadband.with_log_dead_bands`, with the model's ``k_tau``): the motor file
@@ -212,4 +212,5 @@ def save_model(
         motor = with_log_dead_bands(MotorParameters({joint: motor}), dead_band_log)[0][joint]
     p = Path(path)
     models: Mapping[str, MotorModel] = dict(MotorParameters.load_toml(p)) if p.exists() else {}
-    return MotorParameters({**models, joint: motor}).save_toml(p)
+    notes = MotorParameters.notes_of(p) if p.exists() else []  # the file's provenance stays with its other joints
+    return MotorParameters({**models, joint: motor}).save_toml(p, notes)

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from servotau.actuator import effect_names, excitation_report, get_effect
+from servotau.actuator import effect_names, get_effect
 
-from .data import Dataset, describe
+from .data import Dataset, describe, excitation_of
 from .diagnose import Diagnosis
 from .evaluate import Comparison, Metrics
 from .ladder import Ladder
@@ -296,7 +296,7 @@ def write_report(
             parts.append(f"<p>To tell it from <b>{html.escape(other)}</b>: {html.escape(text)}</p>")
         exc = diagnosis.excitation
     else:
-        exc = excitation_report(ds.signals)
+        exc = excitation_of(ds)
     parts.append("<h2>Excitation</h2><ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in exc.lines()) + "</ul>")
     if summary is not None:
         (out / "summary.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")

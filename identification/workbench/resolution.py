@@ -7,6 +7,10 @@ therefore names no effect whose removed error (RMS, ``sqrt(E_base^2 - E_with^2)`
 (:func:`quantisation_floor`, :func:`within_resolution`; a probe's gain likewise, :func:`probes_within_resolution`):
 below the encoder's resolution, the log cannot tell a physical effect from the encoder's rounding.
 
+An encoder that is not quantised sets the floor with its white noise instead (the robust level of the second
+difference of ``q``): the target holds that noise sample by sample, and a term that reads ``q`` at the same sample
+(an acceleration from the angles around it) fits part of it.
+
 The regressors' noise sets two more floors: the fits read the noisy torque and velocity, so the residual carries
 ``k_tau`` times the torque's noise left after smoothing (:func:`torque_noise_floor`) and ``k_v`` times the velocity's
 (:func:`velocity_noise_floor`). A term that is a noise-free function of other signals (the command's history, the
@@ -110,9 +114,23 @@ def _floors(ds, loss, coefficients: Mapping[str, float] | None) -> dict[str, flo
     if not ds.actuator or loss.kind != "least_squares":
         return {}
     coefficients = coefficients or {}
-    return {"the encoder's rounding error": quantisation_floor(ds.preprocessing.get("q", {}).get("resolution", 0.0)),
+    encoder, floor = _encoder_floor(ds)
+    return {encoder: floor,
             "the torque's noise times k_tau": torque_noise_floor(ds, coefficients.get(K_TAU, 0.0)),
             "the velocity's noise times k_v": velocity_noise_floor(ds, coefficients.get(K_V, 0.0))}
+
+
+def _encoder_floor(ds) -> tuple[str, float]:
+    """The encoder's own error in the servo error ``q_des - q`` [rad RMS], and what it is: the rounding error of a
+    quantised angle, else the white noise of ``q`` (:func:`~servotau.actuator.excitation.noise_floor`). The target
+    holds it sample by sample, and so does every term that reads ``q`` at that sample (an acceleration from the
+    angles around it, the command's lead): such a term fits part of it held out without any physical effect."""
+    from servotau.actuator.excitation import noise_floor
+
+    res = ds.preprocessing.get("q", {}).get("resolution", 0.0)
+    if res > 0 or "q" not in ds.signals:
+        return "the encoder's rounding error", quantisation_floor(res)
+    return "the encoder's noise", noise_floor(ds.signals["q"])
 
 
 def _floor_text(ds, loss, coefficients: Mapping[str, float] | None) -> str:

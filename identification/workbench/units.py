@@ -13,16 +13,14 @@ scale and label them.
 
 from __future__ import annotations
 
-import re
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .data import Dataset
+from .data import TORQUE_COLUMN, Dataset
 
 __all__ = ["Unit", "unit_for", "unit_of"]
 
-TORQUE_COLUMN = re.compile(r"tau|torque|friction|effort|trq", re.IGNORECASE)
 _RAD_ALIASES = {"rad"}
 _TORQUE_ALIASES = {"n m", "nm", "n.m", "n*m", "newton metre", "newton meter"}
 

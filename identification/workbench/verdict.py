@@ -5,7 +5,9 @@ that says why, the experiments that separate look-alike effects, and the residua
 The probes that the workbench's own differentiation can feed (``CHECKED_PROBES``) call a log ``unexplained`` only
 if they survive less biased derivatives (:func:`recheck_probes`). A log whose units are doubted or whose joint never
 moves (:class:`~servotau.actuator.Excitation`'s ``unit_doubts`` and ``faults``) gets a message that starts
-"cannot tell which effect" (every effect is then untestable).
+"cannot tell which effect" (every effect is then untestable). So does a log that a probe would call ``unexplained``
+until a constant offset, which the model lacks, is added (:func:`recheck_probes`): a free function of a velocity
+that never reverses fits a constant, and the diagnosis is to be rerun with the offset.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from servotau.actuator import EXPERIMENTS, Effect, Excitation, get_effect
 from servotau.errors import IdentificationError
 
 from ..data.folds import Fold
-from .checks import preprocessing_checks
+from .checks import CONSTANT_ERROR, OFFSET_ADVICE, offset_spec, preprocessing_checks
 from .data import Dataset
 from .evaluate import Comparison, error_of
 from .model import FittedModel, ModelSpec, design, fit_spec
@@ -38,8 +40,8 @@ model fails at its limit (saturation). Residuals of real servos are heavy-tailed
 carry two thirds of the squared error of the simulated default servo), hence the second condition."""
 
 VERDICTS = ("missing_effect", "no_missing_effect", "unexplained", "cannot_tell")
-"""``cannot_tell``: the log itself cannot decide (units doubted, a joint that never moves): every effect is
-untestable and the message says why."""
+"""``cannot_tell``: the log itself cannot decide (units doubted, a joint that never moves: every effect is
+untestable), or the model lacks the constant offset that would let it decide; the message says why."""
 
 TIE = 0.01
 """Two effects whose held-out errors differ by less than this fraction tie: the blocks do not order them
@@ -48,6 +50,9 @@ TIE = 0.01
 LOOKALIKE_SHARE = 0.5
 """An effect that ``needs`` calls untestable only for want of the excitation that tells it from its look-alikes is
 tested where each of them removes at most this share of the held-out error it removes (:func:`lookalikes_apart`)."""
+
+OFFSET_PROBE = "with a constant offset in the model, which it lacks"
+"""How a probe's check over the model with an offset is named in its sentence (:func:`recheck_probes`)."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the preprocessing's own error can feed (lagged inputs; the residual's past, smooth over the
@@ -299,39 +304,43 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
                    ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...]]:
     """``probes`` with the gains of ``CHECKED_PROBES`` that would call the log ``unexplained`` (no effect named)
     replaced by the smallest of theirs and the same probe's with each less biased derivative
-    and with a less biased torque smoothing (:func:`~.checks.preprocessing_checks`); and a sentence per probe that
-    fell below the threshold. Unchanged when an effect is named, no such probe reaches ``PROBE_FACTOR * min_gain``
-    or no check applies (the velocity and the torque are the log's own)."""
+    and with a less biased torque smoothing (:func:`~.checks.preprocessing_checks`), and the gain of any probe that
+    would call it so replaced by its gain over the model with a constant offset when the model of a servo error
+    lacks one (:func:`~.checks.offset_spec`: a free function of a velocity that never reverses fits a constant);
+    and a sentence per probe that fell below the threshold (``OFFSET_PROBE`` in the offset's). Unchanged when an
+    effect is named or no such probe reaches ``PROBE_FACTOR * min_gain``."""
     out = dict(probes)
     if any(nameable(c, min_gain) for c in ranking):
         return out, ()
     todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
-    checks = preprocessing_checks(ds) if todo else []
-    if not checks:
-        return out, ()
+    checks = [(fds, spec, f"with {how}", cause) for fds, how, cause in (preprocessing_checks(ds) if todo else [])]
+    offset = offset_spec(ds, spec)
+    if offset is not None and any(g >= PROBE_FACTOR * min_gain for g in out.values()):
+        checks.append((ds, offset, OFFSET_PROBE, CONSTANT_ERROR))
     notes = []
-    for fds, how, cause in checks:
+    for fds, fspec, how, cause in checks:
+        keys = [k for k, g in out.items() if g >= PROBE_FACTOR * min_gain] if fspec is offset else todo
         cache: dict = {}
         try:
-            bases = base_per_fold(fds, spec, loss, folds, cache)
+            bases = base_per_fold(fds, fspec, loss, folds, cache)
             pred = heldout_prediction(bases, fds.n)
             e0 = error_of(fds.target - pred, fds.target, loss)
-            model = fit_spec(fds.signals, fds.target, spec, loss, cache=cache)
+            model = fit_spec(fds.signals, fds.target, fspec, loss, cache=cache)
             raw = probe_gains(fds, bases, model, loss, e0)
             again, _ = probes_within_resolution(fds, raw, e0, loss, model.coefficients)
         except IdentificationError as exc:
-            notes.append(f"the check of the {', '.join(todo)} probe with {how} failed: {exc}")
+            notes.append(f"the check of the {', '.join(keys)} probe {how} failed: {exc}")
             continue
-        for k in todo:
+        for k in keys:
             g = again.get(k, 0.0)
             if g < out[k]:
                 if g < PROBE_FACTOR * min_gain <= out[k]:
                     if g < raw.get(k, 0.0):  # floored: what it removes there is within that log's noise floor
-                        notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % is {100 * raw[k]:.0f} % with "
+                        notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % is {100 * raw[k]:.0f} % "
                                      f"{how}, within the log's noise floor there: it may be {cause}")
                     else:
                         notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % "
-                                     f"with {how}: it may be {cause}")
+                                     f"{how}: it may be {cause}")
                 out[k] = g
     return out, tuple(notes)
 
@@ -408,6 +417,9 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
         message += f"; untestable on this data: {', '.join(untestable)}"
     if checks:
         message += "; " + "; ".join(checks)
+    if verdict == "no_missing_effect" and any(OFFSET_PROBE in c for c in checks):  # a probe found only the constant
+        verdict, message = "cannot_tell", ("cannot tell which effect: a constant error, which the model lacks, "
+                                           f"stands in for what a probe finds ({OFFSET_ADVICE}); " + message)
     if exc.unit_doubts:
         verdict, message = "cannot_tell", ("cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts)
                                            + "); " + message)

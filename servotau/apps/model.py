@@ -89,6 +89,8 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise IdentificationError(f"--hidden: unknown simulator effect(s) {unknown}: expected some of {list(EFFECTS)}")
     if args.cycles < 1:
         raise IdentificationError(f"--cycles {args.cycles}: expected at least 1")
+    if Path(args.out).suffix.lower() not in (".parquet", ".pq", ".csv"):  # refused before the simulation, not after
+        raise IdentificationError(f"{args.out}: unknown format '{Path(args.out).suffix}': expected .parquet or .csv")
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     cols = simulate_log({e: {} for e in args.hidden}, joint=args.joint, plan=ExcitationPlan(cycles=args.cycles),
                         seed=args.seed, progress=say, base=hanging_sim(config_files(args)))
@@ -149,7 +151,11 @@ def _roles(items: list[str]) -> dict[str, str]:
         role, sep, col = item.partition("=")
         if not sep or not role or not col:
             raise IdentificationError(f"--map {item!r}: expected ROLE=COLUMN with ROLE one of {list(ROLES)}")
-        out[role.strip()] = col.strip()
+        role, col = role.strip(), col.strip()
+        if role in out and out[role] != col:
+            raise IdentificationError(f"--map {role}={col}: role {role} is already mapped to column '{out[role]}': "
+                                      "expected one column per role")
+        out[role] = col
     return out
 
 
@@ -195,6 +201,15 @@ def _check_options(args: argparse.Namespace) -> None:
         raise IdentificationError(f"--folds {args.folds}: expected 2 to {MAX_FOLDS}")
     if getattr(args, "max_steps", 1) < 1:
         raise IdentificationError(f"--max-steps {args.max_steps}: expected at least 1")
+    if not args.align_torque >= 0:  # NaN too
+        raise IdentificationError(f"--align-torque {args.align_torque}: expected a search range >= 0 s (0: off)")
+    seen: dict[Path, str] = {}
+    for option, p in [("log", p) for p in args.log] + [("--test", p) for p in getattr(args, "test", [])]:
+        key = Path(p).resolve()
+        if key in seen:
+            raise IdentificationError(f"{option} {p}: the same file as {seen[key]}: expected each recording once "
+                                      "(a recording fitted on is not held out)")
+        seen[key] = f"{option} {p}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -227,6 +242,9 @@ def run(args: argparse.Namespace) -> int:
         say(f"torque re-timed by {1e3 * shift:.0f} ms")
     for line in describe(ds):
         say(line)
+    if args.unit and ds.actuator and args.unit.strip().lower() != "rad":
+        raise IdentificationError(f"--unit {args.unit}: the target of {ds.source} is the servo error q_des - q, in "
+                                  "[rad] by its role: expected no --unit (convert q and q_des to rad)")
     unit = unit_of(ds, args.unit)
     say(f"error: {unit.quantity} [{unit.si}], shown in {unit.symbol}")
     offset = args.offset == "on" or (args.offset == "auto" and not ds.actuator)
