@@ -30,7 +30,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from servotau.errors import IdentificationError
-from servotau.signal.savgol import savgol_centred
+from servotau.signal.savgol import savgol_centred, savgol_centred_runs
 
 STANDARD = ("t", "q", "q_des", "tau", "dq", "ddq", "u")
 
@@ -289,19 +289,25 @@ def acceleration(s: Signals, window: float) -> np.ndarray:
     w = max(SG_MIN, int(round(window / dt)) | 1)
     if w > s.n:
         return s["ddq"]
-    short = any(b - a < w for a, b in s.runs())
+    runs = s.runs()
+    short = any(b - a < w for a, b in runs)
     ddq = s["ddq"] if short and "ddq" in s else None
 
-    def second_derivative(q: np.ndarray, k: int) -> np.ndarray:
-        if len(q) >= w:
+    def second_derivative(q: np.ndarray) -> np.ndarray:
+        if len(runs) == 1:
             return savgol_centred(q, w, 3, dt, deriv=2)
-        if ddq is not None:
-            return ddq[k:k + len(q)]
-        m = len(q) if len(q) % 2 else len(q) - 1  # no ddq: the run's longest odd window, or no acceleration
-        return savgol_centred(q, m, 3, dt, deriv=2) if m >= 5 else np.zeros(len(q))
+        out = savgol_centred_runs(q, np.asarray([r for r in runs if r[1] - r[0] >= w]), w, 3, dt, 2)
+        for a, b in runs:
+            if b - a >= w:
+                continue
+            if ddq is not None:
+                out[a:b] = ddq[a:b]
+                continue
+            m = b - a if (b - a) % 2 else b - a - 1  # no ddq: the run's longest odd window, or no acceleration
+            out[a:b] = savgol_centred(q[a:b], m, 3, dt, deriv=2) if m >= 5 else 0.0
+        return out
 
-    return s.derived("q", ("ddq", w, dt, s.starts), lambda q: np.concatenate(
-        [second_derivative(q[a:b], a) for a, b in s.runs()]))
+    return s.derived("q", ("ddq", w, dt, s.starts), second_derivative)
 
 
 def inertia(s: Signals, window: float, lag: float = 0.0) -> np.ndarray:

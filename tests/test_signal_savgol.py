@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from servotau.errors import EstimationError
-from servotau.signal.savgol import CausalSavgol, causal_coeffs, delay, savgol_centred
+from servotau.signal.savgol import CausalSavgol, causal_coeffs, delay, savgol_centred, savgol_centred_runs
 
 DT = 1e-3  # [s]
 
@@ -51,6 +51,22 @@ def test_centred_exact_on_polynomials(order):
         np.testing.assert_allclose(y[:, 0], values[k], rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(y[:, 1], 2.0 * values[k], rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(savgol_centred(values[0], 81, order, DT), values[0], atol=1e-9)
+
+
+@pytest.mark.parametrize(("window", "order", "deriv"), [(5, 2, 1), (11, 2, 1), (9, 3, 2), (13, 4, 0)])
+def test_runs_in_one_pass_equal_the_filter_run_by_run(window, order, deriv):
+    """Runs of the window's length up to hundreds of samples, filtered in one pass: each run's result is that of
+    savgol_centred on the run alone (edges included); samples outside the runs keep their value."""
+    rng = np.random.default_rng(window)
+    x = rng.normal(size=900)
+    runs = np.array([[0, 40], [40, 40 + window], [60, 300], [300, 313 + window], [400, 900]])
+    out = savgol_centred_runs(x, runs, window, order, DT, deriv, out=np.full_like(x, 7.0))
+    for a, b in runs:
+        ref = savgol_centred(x[a:b], window, order, DT, deriv=deriv)
+        np.testing.assert_allclose(out[a:b], ref, rtol=0, atol=1e-9 * np.max(np.abs(ref)))
+    assert np.all(out[313 + window:400] == 7.0)
+    with pytest.raises(EstimationError, match="a run shorter than window"):
+        savgol_centred_runs(x, np.array([[0, window - 1]]), window, order, DT, deriv)
 
 
 def test_ring_buffer_matches_direct_dot():

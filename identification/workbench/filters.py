@@ -106,12 +106,13 @@ def differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: 
                    order: int | None = None) -> np.ndarray:
     """Centred SG derivative of ``x`` on each run with a ``window`` of samples (polynomial ``order``, default
     ``deriv + 1`` and at least 2); runs shorter than the window use a shorter window (finite differences when
-    it leaves no more samples than the order)."""
-    from servotau.signal.savgol import savgol_centred
+    it leaves no more samples than the order). The runs that share a window are filtered in one pass."""
+    from servotau.signal.savgol import savgol_centred, savgol_centred_runs
 
     out = np.zeros_like(x)
     w = window if window % 2 else window + 1
     order = max(2, deriv + 1) if order is None else order
+    by_window: dict[int, list[tuple[int, int]]] = {}
     for a, b in runs:
         m = b - a
         wr = min(w, m if m % 2 else m - 1)
@@ -120,6 +121,12 @@ def differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: 
             for _ in range(deriv):
                 seg = np.gradient(seg, dt) if len(seg) > 1 else np.zeros_like(seg)
             out[a:b] = seg
-            continue
-        out[a:b] = savgol_centred(x[a:b], wr, order, dt, deriv=deriv)
+        else:
+            by_window.setdefault(wr, []).append((a, b))
+    for wr, group in by_window.items():
+        if len(group) == 1:  # one run (a log without gaps): the filter itself
+            a, b = group[0]
+            out[a:b] = savgol_centred(x[a:b], wr, order, dt, deriv=deriv)
+        else:
+            savgol_centred_runs(x, np.asarray(group), wr, order, dt, deriv, out=out)
     return out

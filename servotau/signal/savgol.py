@@ -167,6 +167,42 @@ def savgol_centred(x: np.ndarray, window: int, order: int, dt: float, deriv: int
     return savgol_filter(x, window, order, deriv=deriv, delta=float(dt), axis=0, mode="interp")
 
 
+def savgol_centred_runs(x: np.ndarray, runs: np.ndarray, window: int, order: int, dt: float, deriv: int = 0,
+                        out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`savgol_centred` of each run ``[a, b)`` of ``runs`` (each at least ``window`` samples) of the 1-D
+    signal ``x``, written into ``out`` (zeros by default; other samples left as they are): one pass for all runs
+    (a log with thousands of gaps), not one filter call per run. Inside a run the centred coefficients; at its
+    first and last ``(window - 1) // 2`` samples the polynomial fitted to its first (last) full window, as
+    :func:`savgol_centred`, evaluated with fixed coefficients per position (equal to its fit up to round-off)."""
+    window, order = _check_settings(window, order, dt)
+    deriv = _check_deriv(deriv, order)
+    if window % 2 == 0:
+        raise EstimationError(f"window={window}: expected an odd window for a centred filter")
+    x = np.asarray(x, dtype=float)
+    out = np.zeros_like(x) if out is None else out
+    runs = np.asarray(runs, dtype=np.intp).reshape(-1, 2)
+    if not runs.size:
+        return out
+    if np.any(runs[:, 1] - runs[:, 0] < window):
+        raise EstimationError(f"a run shorter than window={window}: expected runs of at least the window")
+    h = window // 2
+    coeffs = np.stack([savgol_coeffs(window, order, deriv=deriv, delta=float(dt), pos=p, use="dot")
+                       for p in range(window)])  # row p: the fit of a window evaluated at its sample p
+    inside = np.zeros(len(x) + 1, dtype=np.int64)  # +1 from a run's first centred sample, -1 past its last
+    np.add.at(inside, runs[:, 0] + h, 1)
+    np.add.at(inside, runs[:, 1] - h, -1)
+    centred = np.flatnonzero(np.cumsum(inside[:-1]) > 0)
+    if centred.size:
+        taps = centred[:, None] + np.arange(-h, h + 1)
+        out[centred] = x[taps] @ coeffs[h]
+    head = x[runs[:, 0, None] + np.arange(window)]  # each run's first window
+    tail = x[runs[:, 1, None] - window + np.arange(window)]  # and its last
+    for p in range(h):
+        out[runs[:, 0] + p] = head @ coeffs[p]
+        out[runs[:, 1] - window + h + 1 + p] = tail @ coeffs[h + 1 + p]
+    return out
+
+
 class CausalSavgol:
     """On-line SG filter of ``n_channels`` signals sampled every ``dt``, without allocation per update.
 
