@@ -104,12 +104,12 @@ def test_many_runs_give_what_each_run_alone_gives():
         return np.concatenate([f(*(v[a:a + m] for v in xs)) for a, m in zip(starts, lengths, strict=True)])
 
     for k in (1, 3, 20):
-        np.testing.assert_array_equal(delayed(x, k, starts), each(lambda v: delayed(v, k), x))
-        np.testing.assert_array_equal(advanced(x, k, starts), each(lambda v: advanced(v, k), x))
+        np.testing.assert_array_equal(delayed(x, k, starts), each(lambda v, k=k: delayed(v, k), x))
+        np.testing.assert_array_equal(advanced(x, k, starts), each(lambda v, k=k: advanced(v, k), x))
     np.testing.assert_array_equal(sign_latch(x, flag, starts), each(sign_latch, x, flag))
     for tc, y0 in ((1e-3, None), (0.05, None), (0.05, 0.3)):
-        np.testing.assert_allclose(lowpass(x, tc, 1e-3, y0, starts), each(lambda v: lowpass(v, tc, 1e-3, y0), x),
-                                   rtol=0, atol=1e-12)
+        alone = each(lambda v, tc=tc, y0=y0: lowpass(v, tc, 1e-3, y0), x)
+        np.testing.assert_allclose(lowpass(x, tc, 1e-3, y0, starts), alone, rtol=0, atol=1e-12)
     v = 0.05 * np.quantile(np.abs(x), 0.95)
 
     def run_strokes(d):  # travel from the run's first move to each reversal, and from the last one to its end
