@@ -127,8 +127,8 @@ class MotorParameters(Mapping[str, MotorModel]):
         for line in Path(path).read_text(encoding="utf-8").splitlines():
             if not line.startswith("#"):
                 break
-            text = line[1:].strip()
-            if text and text not in _FORMAT_LINES:
+            text = line[2:].rstrip() if line.startswith("# ") else line[1:].rstrip()
+            if text.strip() and text not in _FORMAT_LINES:
                 out.append(text)
         return out
 

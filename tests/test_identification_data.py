@@ -132,10 +132,26 @@ def test_decimal_commas_are_refused_naming_the_column(tmp_path):
         read_table(path)
 
 
+@pytest.mark.parametrize(("header", "sep"), [('t;"tau, N m";q', ";"), ("t\tq (rad; joint 2)\ttau", "\t"),
+                                             ("t\tq[rad,j2]\ttau", "\t"), ('t,"q; rad",tau', ",")])
+def test_the_delimiter_is_the_one_that_splits_every_line_alike(tmp_path, header, sep):
+    """A header whose column names hold another candidate delimiter (quoted, or in a tab file) reads by the
+    delimiter that gives every line the same columns."""
+    path = tmp_path / "log.csv"
+    path.write_text(header + "\n" + "\n".join(sep.join(["0.001", "0.5", "2"]) for _ in range(4)) + "\n")
+    assert len(read_table(path)) == 3
+
+
+def test_a_text_column_with_commas_is_not_taken_for_decimal_commas(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_text("t;label;q\n0;a,b;0.5\n0.001;c,d;0.6\n")
+    assert set(read_table(path)) == {"t", "q"}
+
+
 def test_a_binary_file_named_csv_is_refused_without_echoing_it(tmp_path):
     path = tmp_path / "log.csv"
     junk = bytes(range(256)) * 20
     path.write_bytes(junk)
-    with pytest.raises(IdentificationError, match=r"binary content \(byte 128 is not UTF-8 text\)") as err:
+    with pytest.raises(IdentificationError, match=r"byte 128 is not UTF-8 text \(a binary file, or a Latin-1") as err:
         read_table(path)
     assert len(str(err.value)) < 300

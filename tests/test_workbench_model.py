@@ -166,11 +166,14 @@ def test_fitted_model_round_trips_through_the_motor_parameter_file(tmp_path):
     assert set(m.extra["cogging"].shape) == {"period", "phase"} and m.metrics.n_samples == ds.n
     s = ds.signals
     np.testing.assert_allclose(m.predict(s["tau"], s["dq"], q=s["q"]), lad.final.predict(s), rtol=1e-9, atol=1e-12)
-    path.write_text("# identified on robot 7, 2026-11-02\n" + path.read_text())  # the user's remark
+    path.write_text("# identified on robot 7, 2026-11-02\n#   indented: kept as written\n" + path.read_text())
     save_model(lad, path, "RLEG_JOINT2", provenance="test")  # other joints of the file are kept, and its comments
     assert set(MotorParameters.load_toml(path)) == {"RLEG_JOINT3", "RLEG_JOINT2"}
     lines = path.read_text().splitlines()
-    assert lines[0] == "# identified on robot 7, 2026-11-02" and sum(line.startswith("# Units:") for line in lines) == 1
+    assert lines[:2] == ["# identified on robot 7, 2026-11-02", "#   indented: kept as written"]
+    assert lines[2] == "# RLEG_JOINT2: replaced by a model fitted on test (what the notes above say of RLEG_JOINT2 " \
+                       "predates it)"
+    assert sum(line.startswith("# Units:") for line in lines) == 1
 
 
 def test_fixed_point_model_reproduces_itself():

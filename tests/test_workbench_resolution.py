@@ -6,9 +6,10 @@ import math
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
-from servotau.identification.workbench.resolution import encoder_resolution, quantisation_floor
+from servotau.identification.workbench.resolution import encoder_resolution, quantisation_floor, white_noise
 
 
 def test_the_lattice_of_a_quantised_angle_is_its_resolution():
@@ -120,3 +121,13 @@ def test_white_encoder_noise_is_a_floor_too():
     assert d.verdict == "no_missing_effect", d.message
     elastic = d.candidate("elastic")
     assert not elastic.testable and "the encoder's noise" in elastic.reason, elastic.reason
+
+
+def test_the_white_noise_level_leaves_out_a_smooth_motion_at_coarse_periods():
+    """The encoder's white-noise floor of an unquantised angle reads its noise, not the motion's curvature: a 2 Hz,
+    0.5 rad sine sampled every 20 ms gives 0.2 mrad without noise, and its 1 mrad of noise with it."""
+    t = np.arange(2000) * 0.02
+    q = 0.5 * np.sin(2 * np.pi * 2.0 * t)
+    assert white_noise(q) < 3e-4
+    noisy = q + np.random.default_rng(5).normal(0, 1e-3, t.size)
+    assert white_noise(noisy) == pytest.approx(1e-3, rel=0.35)

@@ -11,6 +11,7 @@ Both identification paths read the project's Parquet logs; they keep their own r
 
 from __future__ import annotations
 
+import csv
 import logging
 from collections.abc import Mapping
 from pathlib import Path
@@ -44,12 +45,13 @@ def open_log(path: str | Path):
 
 
 DELIMITERS = (",", ";", "\t")
-"""CSV delimiters: the first of these the header line holds separates the columns."""
+"""CSV delimiters: the one that splits the header line (quotes respected) into the most columns, the same count on
+the next lines, separates them."""
 SNIFF_BYTES = 65536  # [bytes] read to check a CSV file is text and find its header line
 
 
 def _csv_delimiter(p: Path) -> str:
-    """The delimiter of the CSV file ``p`` (``DELIMITERS``, from its header line; ``,`` for one column).
+    """The delimiter of the CSV file ``p`` (``DELIMITERS``, from its first lines; ``,`` for one column).
 
     Raises:
         IdentificationError: The file's start is not UTF-8 text (a binary file named .csv).
@@ -60,14 +62,23 @@ def _csv_delimiter(p: Path) -> str:
         text = head.decode("utf-8")
     except UnicodeDecodeError as exc:
         if exc.start < len(head) - 3:  # not a multi-byte character cut at the end of the sniffed bytes
-            raise IdentificationError(f"log file {p}: binary content (byte {exc.start} is not UTF-8 text): expected "
-                                      "a CSV table (text) or a .parquet file") from None
+            raise IdentificationError(f"log file {p}: byte {exc.start} is not UTF-8 text (a binary file, or a "
+                                      "Latin-1 or Windows export?): expected a CSV table in UTF-8 or a .parquet "
+                                      "file") from None
         text = head[:exc.start].decode("utf-8")
     if "\x00" in text:
         raise IdentificationError(f"log file {p}: binary content (a NUL byte at {text.index(chr(0))}): expected a CSV "
                                   "table (text) or a .parquet file")
-    header = text.lstrip("\ufeff").splitlines()[0] if text.strip() else ""
-    return next((d for d in DELIMITERS if d in header), ",")
+    lines = text.lstrip("\ufeff").splitlines()[:6]
+    if len(lines) > 1 and not text.endswith(("\n", "\r")):
+        lines = lines[:-1]  # the sniffed bytes may end inside a line
+
+    def fields(d: str) -> int:
+        """Columns the delimiter ``d`` gives every line, or 0 when the lines disagree."""
+        counts = {len(row) for row in csv.reader(lines, delimiter=d)}
+        return counts.pop() if len(counts) == 1 else 0
+
+    return max(DELIMITERS, key=lambda d: (fields(d), d == ",")) if lines else ","
 
 
 def read_table(path: str | Path) -> dict[str, np.ndarray]:
@@ -100,7 +111,8 @@ def read_table(path: str | Path) -> dict[str, np.ndarray]:
 
 def _no_decimal_commas(p: Path, table, delimiter: str) -> None:
     """Refuse a CSV table whose numbers are written with decimal commas (``8,879``: a locale's export) rather than
-    read them as text columns and report them missing."""
+    read them as text columns and report them missing: a text column whose first cells all read as numbers once a
+    comma is a point, at least one with a comma."""
     if delimiter == ",":
         return
     import pyarrow as pa
@@ -109,8 +121,9 @@ def _no_decimal_commas(p: Path, table, delimiter: str) -> None:
         col = table.column(name)
         if not pa.types.is_string(col.type) or len(col) == 0:
             continue
-        cell = next((c for c in col.to_pylist()[:100] if c and "," in c), None)
-        if cell is not None and cell.replace(",", ".", 1).lstrip("+-").replace(".", "", 1).isdigit():
+        cells = [c for c in col.slice(0, 100).to_pylist() if c]
+        cell = next((c for c in cells if "," in c), None)
+        if cell is not None and all(_number(c.replace(",", ".")) for c in cells):
             raise IdentificationError(f"log file {p}: column '{name}' holds {cell!r}, a number with a decimal comma: "
                                       "expected decimal points (export the table with '.' as the decimal separator)")
 
@@ -155,6 +168,14 @@ def _mostly_numbers(name: str, values) -> np.ndarray | None:
     log.warning("column '%s': %d of %d cells are not numbers (first: data row %d from 0, %r): read as NaN, their "
                 "rows dropped", name, len(bad), cells.size, bad[0], cells[bad[0]])
     return arr
+
+
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def servotau_joints(columns: Mapping[str, np.ndarray]) -> list[str]:
@@ -215,6 +236,10 @@ def resolve_roles(columns: Mapping[str, np.ndarray], joint: str | None, roles: M
     if "time" not in roles and "t" in columns:
         roles["time"] = "t"
     return roles, joint
+
+
+WRITE_SUFFIXES = (".parquet", ".pq", ".csv")
+"""The formats :func:`write_table` writes, by the file's suffix."""
 
 
 def write_table(columns: Mapping[str, np.ndarray], path: str | Path) -> Path:

@@ -300,7 +300,7 @@ def load_dataset(
             sig[col] = arr[valid]
     n = int(valid.sum())
     segment = used["segment"][valid] if "segment" in roles else None
-    torque = target if _torque_column(roles.get("target")) else None
+    torque = target if _torque_target(roles) else None
     for doubt in unit_doubts(sig.get("q"), target if "command" in roles else None, sig.get("tau_raw", sig.get("tau")),
                              dt, sig.get("dq"), torque):
         notes.append(f"units: {doubt}")
@@ -310,15 +310,15 @@ def load_dataset(
                    prep)
 
 
-def _torque_column(column: str | None) -> bool:
-    """The target column ``column`` holds a torque or a friction [N m] (by its name, ``TORQUE_COLUMN``)."""
-    return column is not None and TORQUE_COLUMN.search(column) is not None
+def _torque_target(roles: Mapping[str, str]) -> bool:
+    """The target is a column holding a torque or a friction [N m] (by its name, ``TORQUE_COLUMN``)."""
+    return "target" in roles and TORQUE_COLUMN.search(roles["target"]) is not None
 
 
 def excitation_of(ds: Dataset) -> Excitation:
     """What the log ``ds`` exercised (:func:`~servotau.actuator.excitation_report`), its torque or friction target
     checked for its unit too."""
-    torque = ds.target if not ds.actuator and _torque_column(ds.roles.get("target")) else None
+    torque = ds.target if _torque_target(ds.roles) else None
     return excitation_report(ds.signals, torque)
 
 

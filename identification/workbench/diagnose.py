@@ -1,19 +1,17 @@
 """Name the missing effect: rank every effect of the library by the held-out error it removes.
 
-For each effect, each held-out block and each shape of the effect's grid, the current model plus the
-effect is fitted on the other blocks with the same loss; the shape of least *training* error is kept
-(nested selection), and the block is predicted. ``heldout_gain = 1 - E_with / E_base``, with ``E`` the
-held-out error (RMS for least squares, ``sqrt`` of the mean asymmetric penalty otherwise): the fraction
-of the held-out error the effect removes.
+For each effect, each held-out block and each shape of the effect's grid, the current model plus the effect is
+fitted on the other blocks with the same loss; the shape of least *training* error is kept (nested selection),
+and the block is predicted. ``heldout_gain = 1 - E_with / E_base``, with ``E`` the held-out error (RMS for least
+squares, ``sqrt`` of the mean asymmetric penalty otherwise): the fraction of the held-out error the effect removes.
 
 Non-parametric *probes* fit flexible functions of one family of signals to the current model's
-residual, also on held-out blocks: bins of velocity; of torque by velocity sign; of ``u`` by velocity
-sign; of position; a polynomial drift in time; lagged differences of ``u`` and ``q_des``; and the residual's
-own past (``memory``: the residual ``h``, ``2 h`` and ``4 h`` earlier, ``h`` = ``MEMORY_HORIZON_S``). The named
-effect is *partially explained* (e.g. a Stribeck velocity outside the grid) when its family's probe
-removes much more than it does, or still removes ``REMAINING`` of the error (and a quarter of what the
-effect did) once the effect is in the model. A probe that removes error when no effect does means
-*unexplained* structure.
+residual, also on held-out blocks: bins of velocity; of torque by velocity sign; of ``u`` by velocity sign; of
+position; a polynomial drift in time; lagged differences of ``u`` and ``q_des``; and the residual's own past
+(``memory``: the residual ``h``, ``2 h`` and ``4 h`` earlier, ``h`` = ``MEMORY_HORIZON_S``). The named effect is
+*partially explained* (e.g. a Stribeck velocity outside the grid) when its family's probe removes much more than
+it does, or still removes ``REMAINING`` of the error (and a quarter of what the effect did) once the effect is in
+the model. A probe that removes error when no effect does means *unexplained* structure.
 
 Verdict:
 
@@ -38,17 +36,17 @@ A function of the velocity (family ``velocity``: Coulomb, Stribeck, power-law vi
 stiction) is re-scored with the less biased velocities too: it can fit the derivative's amplitude error where the
 motion bends (``CHECKED``).
 On a servo-error log whose model has no constant offset, such an effect is also re-scored with one: a constant
-error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``, and lag-like terms fit the bias
-(as does a function of the position, family ``position``, on a joint turning one way)
-("cannot tell: may be a constant error"; the message says to rerun with the offset). Whatever the verdict, the
-message says what an offset alone would remove when that is at least ``min_gain`` (:func:`~.checks.constant_error`),
-unless a lag-like effect already lost its gain to the offset (the message then says to add it).
+error (an encoder's zero, a dead zone under a load of one sign) biases ``k_tau``, which lag-like terms fit (and a
+function of the position, family ``position``, on a joint turning one way): "cannot tell: may be a constant
+error", and the message says to rerun with the offset. Whatever the verdict, the message says what an offset alone
+would remove when that is at least ``min_gain`` (:func:`~.checks.constant_error`), unless an effect already lost
+its gain to the offset (the message then says to add it).
 
-Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are
-ranked but never named: they are reported as untestable, not as absent. A reason that is only a look-alike's
-(``Effect.lookalike_needs``) does not hold where the effect would be named first and its look-alikes remove
-little (:func:`~.verdict.lookalikes_apart`). Nor is an effect named (or a probe
-counted) that removes no more error than the encoder's rounding (:mod:`.resolution`).
+Effects that the data cannot test (see :mod:`~servotau.actuator.excitation`) are ranked but never named: they are
+reported as untestable, not as absent. A reason that is only a look-alike's (``Effect.lookalike_needs``) does not
+hold where the effect would be named first and its look-alikes remove little (:func:`~.verdict.lookalikes_apart`).
+Nor is an effect named (or a probe counted) that removes no more error than the log's noise floor
+(:mod:`.resolution`).
 
 With ``missing_effect``, every other testable effect is scored again over the model with the named one (same
 blocks, checks and floor): the best, if the verdict could name it there, is the next to add
@@ -338,17 +336,16 @@ def diagnose(
         except IdentificationError:
             pass
     probes, floored = probes_within_resolution(ds, probes, e0, loss, coefs)  # then rechecked: the floored are 0
-    probes, checks = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
+    probes, checks, constant_probes = recheck_probes(ds, spec, loss, folds, probes, ranking, min_gain)
     checks += floored + apart
     constant = [c.effect for c in ranking if c.reason and CONSTANT_ERROR in c.reason]
     if constant:
-        verb = "loses its" if len(constant) == 1 else "lose their"
-        checks += (f"{', '.join(constant)} {verb} gain with a constant offset in the model, which it lacks: "
+        checks += (f"{', '.join(constant)} {'loses its' if len(constant) == 1 else 'lose their'} gain {OFFSET_PROBE}: "
                    f"{OFFSET_ADVICE} (an encoder's zero, or a dead zone under a load of one sign; a motor model for "
                    "control takes no offset)",)
     else:
         checks += constant_error(ds, spec, loss, folds, e0, min_gain, cache)
-    d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks)
+    d = verdict_of(ds, spec, base, tuple(ranking), probes, exc, min_gain, checks, constant_probes=constant_probes)
     if d.verdict != "missing_effect" or not next_effect:
         return d
     then = _then_or_none(ds, spec, d.top, ranking, loss, folds, min_gain, cache)

@@ -212,5 +212,8 @@ def save_model(
         motor = with_log_dead_bands(MotorParameters({joint: motor}), dead_band_log)[0][joint]
     p = Path(path)
     models: Mapping[str, MotorModel] = dict(MotorParameters.load_toml(p)) if p.exists() else {}
-    notes = MotorParameters.notes_of(p) if p.exists() else []  # the file's provenance stays with its other joints
+    notes = []
+    if p.exists():  # the file's provenance stays with its other joints; the notes say which one is new
+        notes = [*MotorParameters.notes_of(p), f"{joint}: replaced by a model fitted on {provenance} (what the notes "
+                 f"above say of {joint} predates it)"]
     return MotorParameters({**models, joint: motor}).save_toml(p, notes)

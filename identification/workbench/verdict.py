@@ -301,25 +301,28 @@ def _orthogonal_correlation(ds: Dataset, spec: ModelSpec, base: FittedModel, a: 
 
 
 def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes: Mapping[str, float],
-                   ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...]]:
+                   ranking, min_gain: float) -> tuple[dict[str, float], tuple[str, ...], tuple[str, ...]]:
     """``probes`` with the gains of ``CHECKED_PROBES`` that would call the log ``unexplained`` (no effect named)
     replaced by the smallest of theirs and the same probe's with each less biased derivative
     and with a less biased torque smoothing (:func:`~.checks.preprocessing_checks`), and the gain of any probe that
     would call it so replaced by its gain over the model with a constant offset when the model of a servo error
     lacks one (:func:`~.checks.offset_spec`: a free function of a velocity that never reverses fits a constant);
-    and a sentence per probe that fell below the threshold (``OFFSET_PROBE`` in the offset's). Unchanged when an
-    effect is named or no such probe reaches ``PROBE_FACTOR * min_gain``."""
+    a sentence per probe that fell below the threshold; and the probes that fell below it over the model with the
+    offset (found only the constant). Unchanged when an effect is named or no such probe reaches
+    ``PROBE_FACTOR * min_gain``."""
     out = dict(probes)
     if any(nameable(c, min_gain) for c in ranking):
-        return out, ()
+        return out, (), ()
     todo = [k for k in CHECKED_PROBES if out.get(k, 0.0) >= PROBE_FACTOR * min_gain]
     checks = [(fds, spec, f"with {how}", cause) for fds, how, cause in (preprocessing_checks(ds) if todo else [])]
     offset = offset_spec(ds, spec)
-    if offset is not None and any(g >= PROBE_FACTOR * min_gain for g in out.values()):
+    if offset is not None:  # last: only the probes that survive the other checks
         checks.append((ds, offset, OFFSET_PROBE, CONSTANT_ERROR))
-    notes = []
+    notes, constant = [], []
     for fds, fspec, how, cause in checks:
-        keys = [k for k, g in out.items() if g >= PROBE_FACTOR * min_gain] if fspec is offset else todo
+        keys = [k for k, g in out.items() if g >= PROBE_FACTOR * min_gain] if cause == CONSTANT_ERROR else todo
+        if not keys:
+            continue
         cache: dict = {}
         try:
             bases = base_per_fold(fds, fspec, loss, folds, cache)
@@ -335,6 +338,8 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
             g = again.get(k, 0.0)
             if g < out[k]:
                 if g < PROBE_FACTOR * min_gain <= out[k]:
+                    if cause == CONSTANT_ERROR:
+                        constant.append(k)
                     if g < raw.get(k, 0.0):  # floored: what it removes there is within that log's noise floor
                         notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % is {100 * raw[k]:.0f} % "
                                      f"{how}, within the log's noise floor there: it may be {cause}")
@@ -342,11 +347,11 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
                         notes.append(f"cannot tell: the {k} probe's {100 * out[k]:.0f} % falls to {100 * g:.0f} % "
                                      f"{how}: it may be {cause}")
                 out[k] = g
-    return out, tuple(notes)
+    return out, tuple(notes), tuple(constant)
 
 
 def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str, ...] = (),
-               then: Candidate | None = None) -> Diagnosis:
+               then: Candidate | None = None, constant_probes: tuple[str, ...] = ()) -> Diagnosis:
     named = [c for c in ranking if nameable(c, min_gain)]
     experiments = {}
     confusion = None
@@ -417,9 +422,10 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
         message += f"; untestable on this data: {', '.join(untestable)}"
     if checks:
         message += "; " + "; ".join(checks)
-    if verdict == "no_missing_effect" and any(OFFSET_PROBE in c for c in checks):  # a probe found only the constant
+    if verdict == "no_missing_effect" and constant_probes:  # (recheck_probes) they found only a constant
         verdict, message = "cannot_tell", ("cannot tell which effect: a constant error, which the model lacks, "
-                                           f"stands in for what a probe finds ({OFFSET_ADVICE}); " + message)
+                                           f"stands in for what the {', '.join(constant_probes)} probe finds "
+                                           f"({OFFSET_ADVICE}); " + message)
     if exc.unit_doubts:
         verdict, message = "cannot_tell", ("cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts)
                                            + "); " + message)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import runpy
 import sys
 import time
@@ -80,6 +81,7 @@ def register(subparsers) -> None:
 
 def run_simulate(args: argparse.Namespace) -> int:
     from servotau.identification.data import write_table
+    from servotau.identification.data.tables import WRITE_SUFFIXES
     from servotau.simrobot.servo import EFFECTS
 
     from .simlog import ExcitationPlan, simulate_log
@@ -89,7 +91,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise IdentificationError(f"--hidden: unknown simulator effect(s) {unknown}: expected some of {list(EFFECTS)}")
     if args.cycles < 1:
         raise IdentificationError(f"--cycles {args.cycles}: expected at least 1")
-    if Path(args.out).suffix.lower() not in (".parquet", ".pq", ".csv"):  # refused before the simulation, not after
+    if Path(args.out).suffix.lower() not in WRITE_SUFFIXES:  # refused before the simulation, not after
         raise IdentificationError(f"{args.out}: unknown format '{Path(args.out).suffix}': expected .parquet or .csv")
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     cols = simulate_log({e: {} for e in args.hidden}, joint=args.joint, plan=ExcitationPlan(cycles=args.cycles),
@@ -201,7 +203,7 @@ def _check_options(args: argparse.Namespace) -> None:
         raise IdentificationError(f"--folds {args.folds}: expected 2 to {MAX_FOLDS}")
     if getattr(args, "max_steps", 1) < 1:
         raise IdentificationError(f"--max-steps {args.max_steps}: expected at least 1")
-    if not args.align_torque >= 0:  # NaN too
+    if not (math.isfinite(args.align_torque) and args.align_torque >= 0):
         raise IdentificationError(f"--align-torque {args.align_torque}: expected a search range >= 0 s (0: off)")
     seen: dict[Path, str] = {}
     for option, p in [("log", p) for p in args.log] + [("--test", p) for p in getattr(args, "test", [])]:

@@ -38,6 +38,7 @@ import math
 from typing import Literal
 
 import numpy as np
+from scipy.ndimage import correlate1d
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from servotau.errors import EstimationError
@@ -167,6 +168,11 @@ def savgol_centred(x: np.ndarray, window: int, order: int, dt: float, deriv: int
     return savgol_filter(x, window, order, deriv=deriv, delta=float(dt), axis=0, mode="interp")
 
 
+FEW_RUNS = 16
+"""Callers filter up to this many runs one by one with :func:`savgol_centred` (the same arithmetic to the bit as a
+recording filtered alone), and more in one pass (:func:`savgol_centred_runs`)."""
+
+
 def savgol_centred_runs(x: np.ndarray, runs: np.ndarray, window: int, order: int, dt: float, deriv: int = 0,
                         out: np.ndarray | None = None) -> np.ndarray:
     """:func:`savgol_centred` of each run ``[a, b)`` of ``runs`` (each at least ``window`` samples) of the 1-D
@@ -179,12 +185,16 @@ def savgol_centred_runs(x: np.ndarray, runs: np.ndarray, window: int, order: int
     if window % 2 == 0:
         raise EstimationError(f"window={window}: expected an odd window for a centred filter")
     x = np.asarray(x, dtype=float)
+    if x.ndim != 1:
+        raise EstimationError(f"x has shape {x.shape}: expected (T,)")
     out = np.zeros_like(x) if out is None else out
     runs = np.asarray(runs, dtype=np.intp).reshape(-1, 2)
     if not runs.size:
         return out
     if np.any(runs[:, 1] - runs[:, 0] < window):
         raise EstimationError(f"a run shorter than window={window}: expected runs of at least the window")
+    if not all(np.isfinite(x[a:b]).all() for a, b in runs):
+        raise EstimationError("x contains NaN or inf in a run: expected finite samples")
     h = window // 2
     coeffs = np.stack([savgol_coeffs(window, order, deriv=deriv, delta=float(dt), pos=p, use="dot")
                        for p in range(window)])  # row p: the fit of a window evaluated at its sample p
@@ -193,13 +203,11 @@ def savgol_centred_runs(x: np.ndarray, runs: np.ndarray, window: int, order: int
     np.add.at(inside, runs[:, 1] - h, -1)
     centred = np.flatnonzero(np.cumsum(inside[:-1]) > 0)
     if centred.size:
-        taps = centred[:, None] + np.arange(-h, h + 1)
-        out[centred] = x[taps] @ coeffs[h]
+        out[centred] = correlate1d(np.nan_to_num(x), coeffs[h])[centred]  # samples between runs may be NaN
     head = x[runs[:, 0, None] + np.arange(window)]  # each run's first window
     tail = x[runs[:, 1, None] - window + np.arange(window)]  # and its last
-    for p in range(h):
-        out[runs[:, 0] + p] = head @ coeffs[p]
-        out[runs[:, 1] - window + h + 1 + p] = tail @ coeffs[h + 1 + p]
+    out[runs[:, 0, None] + np.arange(h)] = head @ coeffs[:h].T
+    out[runs[:, 1, None] - h + np.arange(h)] = tail @ coeffs[h + 1:].T
     return out
 
 
