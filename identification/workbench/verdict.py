@@ -423,9 +423,10 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
     if checks:
         message += "; " + "; ".join(checks)
     if verdict == "no_missing_effect" and constant_probes:  # (recheck_probes) they found only a constant
+        found = (f"the {constant_probes[0]} probe finds" if len(constant_probes) == 1 else
+                 f"the {', '.join(constant_probes[:-1])} and {constant_probes[-1]} probes find")
         verdict, message = "cannot_tell", ("cannot tell which effect: a constant error, which the model lacks, "
-                                           f"stands in for what the {', '.join(constant_probes)} probe finds "
-                                           f"({OFFSET_ADVICE}); " + message)
+                                           f"stands in for what {found} ({OFFSET_ADVICE}); " + message)
     if exc.unit_doubts:
         verdict, message = "cannot_tell", ("cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts)
                                            + "); " + message)
