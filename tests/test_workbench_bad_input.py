@@ -153,7 +153,7 @@ def test_time_in_milliseconds_cannot_tell():
     ds = load_dataset({**cols, "t": 1e3 * cols["t"]})
     assert "milliseconds" in _note(ds, "units:")
     d = _diagnose(ds)
-    assert d.verdict == "cannot_tell" and "the sample period is 1 s" in d.message
+    assert d.verdict == "cannot_tell" and "the sample period is 1 s (more than 0.5 s)" in d.message
     assert all(not c.testable for c in d.ranking)
 
 

@@ -50,6 +50,17 @@ def test_the_xl330_logs_load_with_the_documented_mapping(bench):
             assert np.max(np.abs(counts - np.round(counts))) < 1e-2
 
 
+def test_the_measured_logs_raise_no_unit_doubt_and_no_fault(bench):
+    """The units check reads plausibility: every measured recording (the XL330 at 190 Hz, the STS3215 at 10 Hz, its
+    servo error up to 1.3 rad) passes it, so that no real log is refused as "milliseconds?" or "deg/s?"."""
+    from servotau.identification.workbench.data import excitation_of
+
+    for g in [*bench.xl330_groups(), *bench.sts3215_groups()]:
+        for r in g.recordings:
+            e = excitation_of(load_dataset(r.columns, roles=r.roles))
+            assert e.unit_doubts == () and e.faults == (), (r.name, e.unit_doubts, e.faults)
+
+
 def test_the_servo_error_is_the_firmwares_pwm_command(bench):
     """The XL330's P law, read from its own PWM register: duty = error_gain kp (q_des - q), no limit reached."""
     for kp in (100, 200):

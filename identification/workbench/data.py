@@ -37,7 +37,7 @@ named; a constant torque, velocity or acceleration carries no information and is
 differentiated from ``q``). Values implausible in the unit the role expects
 (:func:`~servotau.actuator.excitation.unit_doubts`:
 a position over several turns, a servo error over half a turn, a torque or friction target over kN m, a velocity
-over 50 rad/s, a sample period over 50 ms) are noted; the diagnosis then cannot tell the effects that read them
+over 50 rad/s, a sample period over 0.5 s) are noted; the diagnosis then cannot tell the effects that read them
 (:func:`excitation_of`).
 """
 
