@@ -9,7 +9,18 @@ from dataclasses import replace
 import numpy as np
 
 from servotau.actuator import Signals, excitation_report, get_effect
-from servotau.actuator.excitation import ResolvedGrid, noise_floor, position_coverage
+from servotau.actuator.excitation import (
+    MAX_ERROR,
+    MAX_PERIOD,
+    MAX_SPEED,
+    MAX_TORQUE,
+    TURNS,
+    ResolvedGrid,
+    noise_floor,
+    position_coverage,
+    position_noise_fault,
+    unit_doubts,
+)
 
 
 def _friction_log(peak=0.005, reverse=True, dt=1e-3, seconds=20.0, seed=0):
@@ -121,3 +132,28 @@ def _servo_log(dt, seconds=None):
     dq = 0.3 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t)
     tau = 10 * np.sin(2 * np.pi * 0.3 * t)
     return Signals({"t": t, "q": q, "q_des": q + 1e-4 * tau, "dq": dq, "tau": tau}, dt, len(t))
+
+
+def test_each_unit_bound_doubts_a_value_past_it_and_not_one_below():
+    """Each role's bound: 2 % below it no doubt, 2 % past it one doubt naming the value and the likely unit."""
+    n = 200
+    ramp = np.linspace(-1.0, 1.0, n)
+
+    def doubts(scale: float) -> list[str]:
+        return unit_doubts(np.pi * TURNS * scale * ramp, MAX_ERROR * scale * ramp, MAX_TORQUE * scale * ramp,
+                           MAX_PERIOD * scale, MAX_SPEED * scale * ramp, MAX_TORQUE * scale * ramp)
+
+    assert doubts(0.98) == []
+    past = doubts(1.02)
+    assert len(past) == 6
+    for hint in ("milliseconds", "degrees?", "deg/s?", "the torque reaches", "the torque target reaches"):
+        assert any(hint in d for d in past), hint
+
+
+def test_a_position_of_white_noise_is_a_fault_and_a_sampled_motion_is_not():
+    rng = np.random.default_rng(3)
+    t = np.arange(2000) * 0.02  # 20 ms: the coarsest period the workbench is built for
+    motion = 0.5 * np.sin(2 * np.pi * 2.0 * t)
+    assert position_noise_fault(motion + rng.normal(0, 1e-3, t.size)) is None
+    fault = position_noise_fault(rng.normal(0, 0.1, t.size))
+    assert fault is not None and "the position is mostly noise" in fault

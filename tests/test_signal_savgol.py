@@ -65,6 +65,7 @@ def test_runs_in_one_pass_equal_the_filter_run_by_run(window, order, deriv):
         ref = savgol_centred(x[a:b], window, order, DT, deriv=deriv)
         np.testing.assert_allclose(out[a:b], ref, rtol=0, atol=1e-9 * np.max(np.abs(ref)))
     assert np.all(out[313 + window:400] == 7.0)
+    np.testing.assert_array_equal(savgol_centred_runs(x, np.zeros((0, 2)), window, order, DT, deriv), 0.0)
     with pytest.raises(EstimationError, match="a run shorter than window"):
         savgol_centred_runs(x, np.array([[0, window - 1]]), window, order, DT, deriv)
 
