@@ -150,6 +150,14 @@ class MotorParameters(Mapping[str, MotorModel]):
         return cls({name: _load_model(joints.section(name)) for name in joints.keys()}, source=root.file)
 
 
+def _shape_minimums(name: str) -> dict[str, float]:
+    """The lower bound of each shape parameter of effect ``name`` (:meth:`~.registry.Effect.shape_minimums`); none
+    for an effect not registered (a plugin's, loaded later)."""
+    from .registry import effect_names, get_effect
+
+    return get_effect(name).shape_minimums() if name in effect_names() else {}
+
+
 _FORMAT_LINES = (
     "servotau motor parameters: dq_err = k_tau*tau + k_v*dq [+ k_c*sign(dq)] [+ extra terms]",
     "Units: k_tau [rad/(N m)], k_v [rad/(rad/s)], k_c [rad], rms [rad].",
@@ -191,7 +199,8 @@ def _load_model(sec: Section) -> MotorModel:
         es = sec.section("extra").section(name)
         es.check_keys(["coefficient", "shape"])
         shape = es.section("shape", {})
-        extra[name] = EffectTerm(es.float("coefficient"), {k: shape.float(k) for k in shape.keys()})
+        least = _shape_minimums(name)
+        extra[name] = EffectTerm(es.float("coefficient"), {k: shape.float(k, min=least.get(k)) for k in shape.keys()})
     return MotorModel(
         k_tau=sec.float("k_tau", min=low, strict_min=servo, unit=f"{unit}/(N m)") if "k_tau" in sec else None,
         k_v=sec.float("k_v", min=low, unit=f"{unit}/(rad/s)"),

@@ -191,6 +191,14 @@ class Effect:
         low, high = self.coefficient_range
         return low <= coefficient <= high
 
+    def shape_minimums(self) -> dict[str, float]:
+        """The shape parameters that every shape of a fixed grid holds at 0 or more (a width, a time constant, a
+        speed), each mapped to 0: a motor file's value below it is refused. Empty for a grid computed from the
+        data."""
+        shapes = getattr(self.grid, "shapes", None if callable(self.grid) else self.grid) or ()
+        keys = {k for g in shapes for k in g}
+        return {k: 0.0 for k in sorted(keys) if all(g[k] >= 0 for g in shapes if k in g)}
+
     def grid_for(self, signals: Signals) -> tuple[dict[str, float], ...]:
         """The shapes to try on ``signals``."""
         if callable(self.grid):

@@ -99,6 +99,9 @@ def test_example_file_loads():
             r"finite number >= 0 <= 1",
         ),
         ("version = 1", "version = 2", r"field 'version' = 2: expected 1"),
+        ("n_samples = 1000\n", "n_samples = 1000\n[joints.RLEG_JOINT3.extra.stribeck]\ncoefficient = 1e-4\n"
+         "[joints.RLEG_JOINT3.extra.stribeck.shape]\nv_s = -5.0\n",
+         r"field 'joints.RLEG_JOINT3.extra.stribeck.shape.v_s' = -5.0: expected a finite number >= 0"),
         ('provenance = "test"\n', "", r"field 'joints.RLEG_JOINT3.provenance' missing: expected a string"),
     ],
 )
