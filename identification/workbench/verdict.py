@@ -52,7 +52,8 @@ LOOKALIKE_SHARE = 0.5
 tested where each of them removes at most this share of the held-out error it removes (:func:`lookalikes_apart`)."""
 
 OFFSET_PROBE = "with a constant offset in the model, which it lacks"
-"""How a probe's check over the model with an offset is named in its sentence (:func:`recheck_probes`)."""
+"""How a check over the model with an offset is named in its sentence: a probe's (:func:`recheck_probes`) or an
+effect's (:func:`~.diagnose._checked`)."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the preprocessing's own error can feed (lagged inputs; the residual's past, smooth over the
