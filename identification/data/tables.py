@@ -45,8 +45,8 @@ def open_log(path: str | Path):
 
 
 DELIMITERS = (",", ";", "\t")
-"""CSV delimiters: the one that splits the header line (quotes respected) into the most columns, the same count on
-the next lines, separates them."""
+"""CSV delimiters: the one that splits each of the first lines (quotes respected) into the same number of columns,
+the most, separates them (a comma on a tie)."""
 SNIFF_BYTES = 65536  # [bytes] read to check a CSV file is text and find its header line
 
 
