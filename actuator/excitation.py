@@ -204,7 +204,8 @@ def unit_doubts(q: np.ndarray | None, error: np.ndarray | None, tau: np.ndarray 
         v = float(np.quantile(np.abs(dq), PEAK_QUANTILE))
         if v > MAX_SPEED:
             out.append(f"the velocity reaches {v:.4g} rad/s ({100 * PEAK_QUANTILE:.0f} % of |dq|, more than "
-                       f"{MAX_SPEED:g} rad/s): expected [rad/s] at the joint; deg/s? (convert the column)")
+                       f"{MAX_SPEED:g} rad/s): expected [rad/s] at the joint; deg/s? (convert the column; a motor-side "
+                       "velocity: divide it by the gear ratio)")
     for what, x in (("torque", tau), ("torque target", torque_target)):
         if x is not None and x.size:
             m = float(np.quantile(np.abs(x), PEAK_QUANTILE))
