@@ -13,6 +13,7 @@ from servotau.identification.data import (
     segments,
     shift,
     time_blocks,
+    write_table,
 )
 
 
@@ -155,3 +156,10 @@ def test_a_binary_file_named_csv_is_refused_without_echoing_it(tmp_path):
     with pytest.raises(IdentificationError, match=r"byte 128 is not UTF-8 text \(a binary file, or a Latin-1") as err:
         read_table(path)
     assert len(str(err.value)) < 300
+
+
+def test_a_parquet_file_named_csv_is_told_to_be_renamed(tmp_path):
+    path = write_table({"t": np.arange(3.0), "q": np.zeros(3)}, tmp_path / "log.parquet").rename(tmp_path / "log.csv")
+    with pytest.raises(IdentificationError, match="a Parquet file .* named like a CSV table: expected the suffix "
+                                                  r"\.parquet"):
+        read_table(path)

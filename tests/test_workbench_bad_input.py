@@ -9,6 +9,7 @@ import pytest
 from support.synthetic import K_TAU, friction_recording, synthetic_table
 
 from servotau.actuator import excitation_report, get_effect
+from servotau.errors import IdentificationError
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
 from servotau.identification.workbench.data import describe
 from servotau.identification.workbench.verdict import VERDICTS
@@ -219,3 +220,10 @@ def test_a_command_logged_as_a_copy_of_the_position_cannot_tell():
     d = _diagnose(load_dataset(cols), ["coulomb", "delay"])
     assert d.verdict == "cannot_tell"
     assert d.message.startswith("cannot tell which effect: the target never changes (= 0)"), d.message
+
+
+def test_a_table_with_a_header_and_no_rows_says_so(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_text("t,q,q_des,tau\n")
+    with pytest.raises(IdentificationError, match=r"have no rows: expected a table of samples"):
+        load_dataset(path)

@@ -58,6 +58,9 @@ def _csv_delimiter(p: Path) -> str:
     """
     with p.open("rb") as f:
         head = f.read(SNIFF_BYTES)
+    if head.startswith(b"PAR1"):
+        raise IdentificationError(f"log file {p}: a Parquet file (it starts with PAR1) named like a CSV table: "
+                                  "expected the suffix .parquet (rename the file)")
     try:
         text = head.decode("utf-8")
     except UnicodeDecodeError as exc:

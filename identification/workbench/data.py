@@ -202,6 +202,8 @@ def load_dataset(
         columns = _uniform(columns, roles, notes)
     used = {role: columns[col] for role, col in roles.items()}
     n_total = len(next(iter(columns.values())))
+    if n_total == 0:
+        raise IdentificationError(f"{name}: the columns {list(columns)} have no rows: expected a table of samples")
     valid = np.ones(n_total, dtype=bool)
     for role, arr in used.items():
         bad = ~np.isfinite(arr)
