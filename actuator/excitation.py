@@ -162,14 +162,16 @@ class Excitation:
         return out
 
 
-def noise_floor(x: np.ndarray) -> float:
+def noise_floor(x: np.ndarray, difference: int = 2) -> float:
     """White-noise standard deviation of ``x`` from its high-frequency part: the robust spread (1.4826 times the
-    median absolute value) of the second difference over ``sqrt(6)``; a smooth motion hardly contributes. 0 for
-    fewer than 3 samples or a quantised signal that mostly holds still."""
+    median absolute value) of its ``difference``-th difference over the root of that difference's white-noise gain
+    (``binom(2 k, k)``: 6 for the second, 70 for the fourth); a smooth motion hardly contributes, and less with a
+    higher difference (a 2 Hz, 0.5 rad sine at 20 ms: 13 mrad with the second, 0.2 mrad with the fourth). 0 for
+    fewer than ``difference + 1`` samples or a quantised signal that mostly holds still."""
     x = np.asarray(x, dtype=np.float64)
-    if x.size < 3:
+    if x.size <= difference:
         return 0.0
-    return float(1.4826 * np.median(np.abs(np.diff(x, 2))) / np.sqrt(6.0))
+    return float(1.4826 * np.median(np.abs(np.diff(x, difference))) / math.sqrt(math.comb(2 * difference, difference)))
 
 
 def period_jitter(t: np.ndarray, period: float) -> tuple[float, float]:

@@ -8,8 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from servotau.actuator.excitation import noise_floor
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
-from servotau.identification.workbench.resolution import encoder_resolution, quantisation_floor, white_noise
+from servotau.identification.workbench.resolution import encoder_resolution, quantisation_floor
 
 
 def test_the_lattice_of_a_quantised_angle_is_its_resolution():
@@ -128,6 +129,6 @@ def test_the_white_noise_level_leaves_out_a_smooth_motion_at_coarse_periods():
     0.5 rad sine sampled every 20 ms gives 0.2 mrad without noise, and its 1 mrad of noise with it."""
     t = np.arange(2000) * 0.02
     q = 0.5 * np.sin(2 * np.pi * 2.0 * t)
-    assert white_noise(q) < 3e-4
+    assert noise_floor(q, difference=4) < 3e-4
     noisy = q + np.random.default_rng(5).normal(0, 1e-3, t.size)
-    assert white_noise(noisy) == pytest.approx(1e-3, rel=0.35)
+    assert noise_floor(noisy, difference=4) == pytest.approx(1e-3, rel=0.35)

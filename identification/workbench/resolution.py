@@ -8,8 +8,8 @@ therefore names no effect whose removed error (RMS, ``sqrt(E_base^2 - E_with^2)`
 below the encoder's resolution, the log cannot tell a physical effect from the encoder's rounding.
 
 An encoder that is not quantised sets the floor with its white noise instead (the robust level of the fourth
-difference of ``q``, :func:`white_noise`): the target holds that noise sample by sample, and a term that reads ``q``
-at the same sample (an acceleration from the angles around it) fits part of it.
+difference of ``q``, :func:`~servotau.actuator.excitation.noise_floor`): the target holds that noise sample by
+sample, and a term that reads ``q`` at the same sample (an acceleration from the angles around it) fits part of it.
 
 The regressors' noise sets two more floors: the fits read the noisy torque and velocity, so the residual carries
 ``k_tau`` times the torque's noise left after smoothing (:func:`torque_noise_floor`) and ``k_v`` times the velocity's
@@ -29,7 +29,7 @@ import numpy as np
 from servotau.actuator.terms import K_TAU, K_V
 
 __all__ = ["encoder_resolution", "error_floor", "probes_within_resolution", "quantisation_floor", "removed_error",
-           "torque_noise_floor", "velocity_noise_floor", "white_noise", "within_resolution"]
+           "torque_noise_floor", "velocity_noise_floor", "within_resolution"]
 
 LATTICE_SHARE = 0.95  # of the steps between distinct angles that must be whole multiples of the smallest one
 LATTICE_TOL = 1e-3  # [steps] how close to a whole multiple
@@ -122,23 +122,16 @@ def _floors(ds, loss, coefficients: Mapping[str, float] | None) -> dict[str, flo
 
 def _encoder_floor(ds) -> tuple[str, float]:
     """The encoder's own error in the servo error ``q_des - q`` [rad RMS], and what it is: the rounding error of a
-    quantised angle, else the white noise of ``q`` (:func:`white_noise`). The target holds it sample by sample, and
-    so does every term that reads ``q`` at that sample (an acceleration from the angles around it, the command's
-    lead): such a term fits part of it held out without any physical effect."""
+    quantised angle, else the white noise of ``q`` from its fourth difference
+    (:func:`~servotau.actuator.excitation.noise_floor`: a smooth motion hardly enters it even at coarse periods). The
+    target holds it sample by sample, and so does every term that reads ``q`` at that sample (an acceleration from
+    the angles around it, the command's lead): such a term fits part of it held out without any physical effect."""
+    from servotau.actuator.excitation import noise_floor
+
     res = ds.preprocessing.get("q", {}).get("resolution", 0.0)
     if res > 0 or "q" not in ds.signals:
         return "the encoder's rounding error", quantisation_floor(res)
-    return "the encoder's noise", white_noise(ds.signals["q"])
-
-
-def white_noise(x: np.ndarray) -> float:
-    """White-noise standard deviation of ``x`` from its fourth difference (robust spread over ``sqrt(70)``): a smooth
-    motion contributes its fourth derivative times the period^4, which stays far below the second difference's
-    curvature at coarse sample periods (a 2 Hz, 0.5 rad sine at 20 ms: 0.2 mrad against 13 mrad)."""
-    x = np.asarray(x, dtype=np.float64)
-    if x.size < 5:
-        return 0.0
-    return float(1.4826 * np.median(np.abs(np.diff(x, 4))) / np.sqrt(70.0))
+    return "the encoder's noise", noise_floor(ds.signals["q"], difference=4)
 
 
 def _floor_text(ds, loss, coefficients: Mapping[str, float] | None) -> str:
