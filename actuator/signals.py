@@ -30,7 +30,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from servotau.errors import IdentificationError
-from servotau.signal.savgol import FEW_RUNS, savgol_centred, savgol_centred_runs
+from servotau.signal.savgol import savgol_centred, savgol_centred_runs
 
 STANDARD = ("t", "q", "q_des", "tau", "dq", "ddq", "u")
 
@@ -294,13 +294,7 @@ def acceleration(s: Signals, window: float) -> np.ndarray:
     ddq = s["ddq"] if short and "ddq" in s else None
 
     def second_derivative(q: np.ndarray) -> np.ndarray:
-        long = [r for r in runs if r[1] - r[0] >= w]
-        if len(long) > FEW_RUNS:
-            out = savgol_centred_runs(q, np.asarray(long), w, 3, dt, 2)
-        else:  # run by run (a log without gaps, or a few recordings joined)
-            out = np.zeros_like(q)
-            for a, b in long:
-                out[a:b] = savgol_centred(q[a:b], w, 3, dt, deriv=2)
+        out = savgol_centred_runs(q, np.asarray([r for r in runs if r[1] - r[0] >= w]), w, 3, dt, 2)
         for a, b in runs:
             if b - a >= w:
                 continue

@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from servotau.errors import EstimationError
-from servotau.signal.savgol import CausalSavgol, causal_coeffs, delay, savgol_centred, savgol_centred_runs
+from servotau.signal.savgol import (
+    FEW_RUNS,
+    CausalSavgol,
+    causal_coeffs,
+    delay,
+    savgol_centred,
+    savgol_centred_runs,
+)
 
 DT = 1e-3  # [s]
 
@@ -55,11 +62,13 @@ def test_centred_exact_on_polynomials(order):
 
 @pytest.mark.parametrize(("window", "order", "deriv"), [(5, 2, 1), (11, 2, 1), (9, 3, 2), (13, 4, 0)])
 def test_runs_in_one_pass_equal_the_filter_run_by_run(window, order, deriv):
-    """Runs of the window's length up to hundreds of samples, filtered in one pass: each run's result is that of
-    savgol_centred on the run alone (edges included); samples outside the runs keep their value."""
+    """Runs of the window's length up to hundreds of samples, more than FEW_RUNS so that they are filtered in one
+    pass: each run's result is that of savgol_centred on the run alone (edges included); samples outside the runs
+    keep their value."""
     rng = np.random.default_rng(window)
-    x = rng.normal(size=900)
-    runs = np.array([[0, 40], [40, 40 + window], [60, 300], [300, 313 + window], [400, 900]])
+    x = rng.normal(size=900 + 30 * FEW_RUNS)
+    runs = np.array([[0, 40], [40, 40 + window], [60, 300], [300, 313 + window], [400, 900],
+                     *([900 + 30 * i, 900 + 30 * i + window + i % 7] for i in range(FEW_RUNS))])
     out = savgol_centred_runs(x, runs, window, order, DT, deriv, out=np.full_like(x, 7.0))
     for a, b in runs:
         ref = savgol_centred(x[a:b], window, order, DT, deriv=deriv)

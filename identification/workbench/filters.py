@@ -106,9 +106,9 @@ def differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: 
                    order: int | None = None) -> np.ndarray:
     """Centred SG derivative of ``x`` on each run with a ``window`` of samples (polynomial ``order``, default
     ``deriv + 1`` and at least 2); runs shorter than the window use a shorter window (finite differences when
-    it leaves no more samples than the order). More than ``FEW_RUNS`` runs that share a window are filtered in one
-    pass."""
-    from servotau.signal.savgol import FEW_RUNS, savgol_centred, savgol_centred_runs
+    it leaves no more samples than the order); the runs that share a window go to one
+    :func:`~servotau.signal.savgol.savgol_centred_runs` call."""
+    from servotau.signal.savgol import savgol_centred_runs
 
     out = np.zeros_like(x)
     w = window if window % 2 else window + 1
@@ -125,9 +125,5 @@ def differentiate(x: np.ndarray, runs: list[tuple[int, int]], dt: float, deriv: 
         else:
             by_window.setdefault(wr, []).append((a, b))
     for wr, group in by_window.items():
-        if len(group) <= FEW_RUNS:  # the filter itself, run by run (a log without gaps, or a few recordings joined)
-            for a, b in group:
-                out[a:b] = savgol_centred(x[a:b], wr, order, dt, deriv=deriv)
-        else:
-            savgol_centred_runs(x, np.asarray(group), wr, order, dt, deriv, out=out)
+        savgol_centred_runs(x, np.asarray(group), wr, order, dt, deriv, out=out)
     return out

@@ -169,15 +169,16 @@ def savgol_centred(x: np.ndarray, window: int, order: int, dt: float, deriv: int
 
 
 FEW_RUNS = 16
-"""Callers filter up to this many runs one by one with :func:`savgol_centred` (the same arithmetic to the bit as a
-recording filtered alone), and more in one pass (:func:`savgol_centred_runs`)."""
+"""Up to this many runs, :func:`savgol_centred_runs` filters them one by one with :func:`savgol_centred` (the same
+arithmetic to the bit as a recording filtered alone); more in one pass."""
 
 
 def savgol_centred_runs(x: np.ndarray, runs: np.ndarray, window: int, order: int, dt: float, deriv: int = 0,
                         out: np.ndarray | None = None) -> np.ndarray:
     """:func:`savgol_centred` of each run ``[a, b)`` of ``runs`` (each at least ``window`` samples) of the 1-D
-    signal ``x``, written into ``out`` (zeros by default; other samples left as they are): one pass for all runs
-    (a log with thousands of gaps), not one filter call per run. Inside a run the centred coefficients; at its
+    signal ``x``, written into ``out`` (zeros by default; other samples left as they are). Up to ``FEW_RUNS`` runs
+    (a log without gaps, a few recordings joined), one :func:`savgol_centred` call each; more (a log with thousands
+    of gaps) in one pass, not one filter call per run. Inside a run the centred coefficients; at its
     first and last ``(window - 1) // 2`` samples the polynomial fitted to its first (last) full window, as
     :func:`savgol_centred`, evaluated with fixed coefficients per position (equal to its fit up to round-off)."""
     window, order = _check_settings(window, order, dt)
@@ -193,6 +194,10 @@ def savgol_centred_runs(x: np.ndarray, runs: np.ndarray, window: int, order: int
         return out
     if np.any(runs[:, 1] - runs[:, 0] < window):
         raise EstimationError(f"a run shorter than window={window}: expected runs of at least the window")
+    if len(runs) <= FEW_RUNS:
+        for a, b in runs:
+            out[a:b] = savgol_centred(x[a:b], window, order, dt, deriv=deriv)
+        return out
     if not all(np.isfinite(x[a:b]).all() for a, b in runs):
         raise EstimationError("x contains NaN or inf in a run: expected finite samples")
     h = window // 2
