@@ -241,8 +241,18 @@ def resolve_roles(columns: Mapping[str, np.ndarray], joint: str | None, roles: M
     return roles, joint
 
 
-WRITE_SUFFIXES = (".parquet", ".pq", ".csv")
-"""The formats :func:`write_table` writes, by the file's suffix."""
+def table_format(path: str | Path) -> str:
+    """``"csv"`` or ``"parquet"``: the format :func:`write_table` writes to ``path``, by its suffix.
+
+    Raises:
+        IdentificationError: Another suffix (checked before any work that would end in writing it).
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix == ".csv":
+        return "csv"
+    if suffix in (".parquet", ".pq"):
+        return "parquet"
+    raise IdentificationError(f"{path}: unknown format '{Path(path).suffix}': expected .parquet or .csv")
 
 
 def write_table(columns: Mapping[str, np.ndarray], path: str | Path) -> Path:
@@ -250,16 +260,15 @@ def write_table(columns: Mapping[str, np.ndarray], path: str | Path) -> Path:
     import pyarrow as pa
 
     p = Path(path)
+    fmt = table_format(p)
     p.parent.mkdir(parents=True, exist_ok=True)
     table = pa.table({k: np.asarray(v) for k, v in columns.items()})
-    if p.suffix.lower() == ".csv":
+    if fmt == "csv":
         import pyarrow.csv as pcsv
 
         pcsv.write_csv(table, p)
-    elif p.suffix.lower() in (".parquet", ".pq"):
+    else:
         import pyarrow.parquet as pq
 
         pq.write_table(table, p)
-    else:
-        raise IdentificationError(f"{p}: unknown format '{p.suffix}': expected .parquet or .csv")
     return p

@@ -422,8 +422,7 @@ def _checked(ds: Dataset, spec: ModelSpec, ranking: list[Candidate], loss: Loss,
             preprocessed = preprocessing_checks(ds)
         alternatives = [(d, spec, f"with {how}", cause) for d, how, cause in preprocessed or () if cause in causes]
         if offset is not None and CONSTANT_ERROR in causes:
-            alternatives.append((ds, offset, f"{OFFSET_PROBE} (--offset on)",
-                                 CONSTANT_ERROR))
+            alternatives.append((ds, offset, f"{OFFSET_PROBE} (--offset on)", CONSTANT_ERROR))
         if not alternatives:
             break
         eff = resolve_effects([top.effect])[0]

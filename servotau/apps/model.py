@@ -81,7 +81,7 @@ def register(subparsers) -> None:
 
 def run_simulate(args: argparse.Namespace) -> int:
     from servotau.identification.data import write_table
-    from servotau.identification.data.tables import WRITE_SUFFIXES
+    from servotau.identification.data.tables import table_format
     from servotau.simrobot.servo import EFFECTS
 
     from .simlog import ExcitationPlan, simulate_log
@@ -91,8 +91,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise IdentificationError(f"--hidden: unknown simulator effect(s) {unknown}: expected some of {list(EFFECTS)}")
     if args.cycles < 1:
         raise IdentificationError(f"--cycles {args.cycles}: expected at least 1")
-    if Path(args.out).suffix.lower() not in WRITE_SUFFIXES:  # refused before the simulation, not after
-        raise IdentificationError(f"{args.out}: unknown format '{Path(args.out).suffix}': expected .parquet or .csv")
+    table_format(args.out)  # an unknown format is refused before the simulation, not after
     say = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     cols = simulate_log({e: {} for e in args.hidden}, joint=args.joint, plan=ExcitationPlan(cycles=args.cycles),
                         seed=args.seed, progress=say, base=hanging_sim(config_files(args)))
