@@ -95,6 +95,7 @@ def fit_asymmetric(
     min_samples: int | None = None,
     max_condition: float = MAX_CONDITION,
     what: str | None = None,
+    constant: tuple[str, ...] = (),
     **solver_options,
 ) -> LinearFit:
     """Fit ``A x + offset ~ dq_err`` with the asymmetric penalty of eq. 8.
@@ -108,6 +109,7 @@ def fit_asymmetric(
         min_samples: Fewest samples accepted (default 10 per coefficient).
         max_condition: Largest accepted condition number of the column-normalised ``A``.
         what: Name of the data set, prefixed to error messages.
+        constant: Names of columns that may be constant (a fitted offset: eq. 8 stays convex with it).
         **solver_options: ``max_iter`` for Newton; ``eps``, ``max_iter``, ``time_limit`` for OSQP.
 
     Raises:
@@ -123,6 +125,7 @@ def fit_asymmetric(
         min_samples=min_samples,
         max_condition=max_condition,
         what=label(what, f"asymmetric fit ({solver})"),
+        constant=constant,
     )
     start = time.perf_counter()
     if solver == "newton":

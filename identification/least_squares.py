@@ -23,6 +23,7 @@ def fit_least_squares(
     min_samples: int | None = None,
     max_condition: float = MAX_CONDITION,
     what: str | None = None,
+    constant: tuple[str, ...] = (),
 ) -> LinearFit:
     """Least-squares fit of ``A x + offset = dq_err``, ``A`` = ``regressors``.
 
@@ -33,6 +34,7 @@ def fit_least_squares(
         min_samples: Fewest samples accepted (default 10 per coefficient).
         max_condition: Largest accepted condition number of the column-normalised ``A``.
         what: Name of the data set, prefixed to error messages.
+        constant: Names of columns that may be constant (a fitted offset).
 
     Raises:
         IdentificationError: Bad data, see :func:`~servotau.identification.problem.prepare_problem`.
@@ -44,6 +46,7 @@ def fit_least_squares(
         min_samples=min_samples,
         max_condition=max_condition,
         what=_label(what, "least-squares fit"),
+        constant=constant,
     )
     start = time.perf_counter()
     xs, *_ = np.linalg.lstsq(prob.a, prob.b, rcond=None)

@@ -59,8 +59,10 @@ def prepare_problem(
     min_samples: int | None = None,
     max_condition: float = MAX_CONDITION,
     what: str = "fit",
+    constant: tuple[str, ...] = (),
 ) -> Problem:
     """Validate ``regressors``, ``dq_err`` [rad] and the known model part ``offset`` [rad], and scale them.
+    The columns named in ``constant`` may be constant (a fitted offset); any other constant column is refused.
 
     Raises:
         IdentificationError: NaN/inf, mismatched lengths, fewer than ``min_samples`` samples
@@ -79,7 +81,7 @@ def prepare_problem(
     if min_samples is None:
         min_samples = MIN_SAMPLES_PER_PARAMETER * len(regressors.names)
     check_min_samples(n, min_samples, f"{what} (coefficients {list(regressors.names)})")
-    col_scale = column_scales(regressors.names, regressors.matrix, what=f"{what}: regressor")
+    col_scale = column_scales(regressors.names, regressors.matrix, what=f"{what}: regressor", constant=constant)
     a = regressors.matrix / col_scale
     gram = a.T @ a
     condition = scaled_condition(gram / n)

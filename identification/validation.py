@@ -58,11 +58,14 @@ def check_min_samples(n: int, minimum: int, what: str) -> None:
         raise IdentificationError(f"{what}: {n} samples: expected at least {minimum}")
 
 
-def column_scales(names: tuple[str, ...], matrix: np.ndarray, *, what: str = "regressor") -> np.ndarray:
+def column_scales(
+    names: tuple[str, ...], matrix: np.ndarray, *, what: str = "regressor", constant: tuple[str, ...] = ()
+) -> np.ndarray:
     """Return the RMS of every column; raise if a column is zero or does not vary (no excitation).
 
     A constant column (e.g. ``sign(dq)`` when the joint moved one way only, or a torque that never
-    changed) cannot be told apart from an offset, so it is refused as unexcited.
+    changed) cannot be told apart from an offset, so it is refused as unexcited, unless it is named in
+    ``constant`` (the model's own offset column).
     """
     scales = np.sqrt(np.mean(matrix * matrix, axis=0))
     for j, name in enumerate(names):
@@ -72,7 +75,7 @@ def column_scales(names: tuple[str, ...], matrix: np.ndarray, *, what: str = "re
             raise IdentificationError(
                 f"{what} column '{name}' is all zero: no excitation, expected samples where it is nonzero"
             )
-        if float(np.ptp(col)) <= 1e-12 * peak:
+        if name not in constant and float(np.ptp(col)) <= 1e-12 * peak:
             raise IdentificationError(
                 f"{what} column '{name}' is constant (= {col[0]:g}): no excitation, expected it to vary across samples"
             )

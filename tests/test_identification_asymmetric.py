@@ -5,6 +5,7 @@ import pytest
 
 from servotau.errors import IdentificationError
 from servotau.identification import (
+    Regressors,
     asymmetric_cost,
     fit_asymmetric,
     fit_least_squares,
@@ -42,6 +43,25 @@ def test_newton_is_the_minimiser():
     for dx in np.random.default_rng(2).standard_normal((20, 2)):
         x = fit.x * (1.0 + 1e-4 * dx)
         assert asymmetric_cost(a.matrix @ x - d.dq_err, d.dq_err, 5.0) > best
+
+
+def test_a_constant_column_named_as_constant_is_fitted_as_an_offset():
+    """A column of ones named in ``constant`` is fitted with the others in the one Newton solve (eq. 8 stays
+    convex): the solution is the minimiser against perturbations of every coefficient, the offset included,
+    and matches the OSQP QP; the same column not named is refused as unexcited."""
+    d = make_synthetic(1000, seed=5)
+    names = ("k_tau", "k_v", "offset")
+    a = Regressors(names, np.column_stack([d.tau, d.dq, np.ones_like(d.tau)]))
+    y = d.dq_err + 3e-4
+    fit = fit_asymmetric(a, y, 5.0, constant=("offset",))
+    best = asymmetric_cost(a.matrix @ fit.x - y, y, 5.0)
+    for dx in np.random.default_rng(5).standard_normal((20, 3)):
+        x = fit.x * (1.0 + 1e-4 * dx)
+        assert asymmetric_cost(a.matrix @ x - y, y, 5.0) > best
+    qp = fit_asymmetric(a, y, 5.0, constant=("offset",), solver="osqp")
+    np.testing.assert_allclose(qp.x, fit.x, rtol=1e-5)
+    with pytest.raises(IdentificationError, match="column 'offset' is constant"):
+        fit_asymmetric(a, y, 5.0)
 
 
 def test_asymmetric_overestimates_less_than_least_squares():

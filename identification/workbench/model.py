@@ -220,10 +220,8 @@ def solve(
             x = np.zeros(len(names))
             x[keep] = solve([k for k, ok in zip(names, keep, strict=True) if ok], matrix[:, keep], target, loss, rows)
             return x
-    if loss.kind != "least_squares":
-        if OFFSET in names:  # the fitting problem refuses a constant column: centre the others instead
-            return _solve_with_offset(names, a, b, loss)
-        return fit_with_loss(Regressors(tuple(names), a), b, loss).x
+    if loss.kind != "least_squares":  # eq. 8 is convex with the offset too: one exact Newton solve
+        return fit_with_loss(Regressors(tuple(names), a), b, loss, constant=(OFFSET,)).x
     n, k = a.shape
     check_min_samples(n, MIN_SAMPLES_PER_PARAMETER * k, f"fit (coefficients {names})")
     ms = np.einsum("ij,ij->j", a, a) / n
@@ -233,32 +231,6 @@ def solve(
     gram = an.T @ an
     check_condition(names, gram, n)
     return np.linalg.solve(gram, an.T @ b) / scale
-
-
-def _solve_with_offset(names: list[str], a: np.ndarray, b: np.ndarray, loss: Loss) -> np.ndarray:
-    """Asymmetric fit with an ``offset`` column: the offset searched (golden section on the loss, other
-    coefficients fitted for each offset), since the fitting problem refuses a constant column."""
-    j = names.index(OFFSET)
-    keep = [i for i in range(len(names)) if i != j]
-    rest = Regressors(tuple(names[i] for i in keep), a[:, keep])
-
-    def fit(c: float) -> tuple[float, np.ndarray]:
-        x = fit_with_loss(rest, b, loss, offset=np.full(b.size, c)).x
-        return asymmetric_cost(a[:, keep] @ x + c - b, b, loss.w), x
-
-    lo, hi = float(np.min(b)), float(np.max(b))
-    g = (np.sqrt(5.0) - 1.0) / 2.0
-    for _ in range(30):
-        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
-        if fit(m1)[0] <= fit(m2)[0]:
-            hi = m2
-        else:
-            lo = m1
-    c = 0.5 * (lo + hi)
-    out = np.zeros(len(names))
-    out[keep] = fit(c)[1]
-    out[j] = c
-    return out
 
 
 def fold_coefficients(x: np.ndarray, spec: ModelSpec, slices) -> tuple[ModelSpec, dict[str, float]]:
