@@ -377,13 +377,18 @@ def resolvable(shape: Mapping[str, float], keys: Iterable[str], period: float | 
 @dataclass(frozen=True)
 class ResolvedGrid:
     """An effect's grid restricted to the shapes the log's sample period resolves (:func:`resolvable`): called
-    with the signals, the shapes whose time parameters ``keys`` [s] are at least :func:`shortest`; when no shape
-    with a positive time parameter is, the whole grid (the effect's ``needs`` then says it cannot be told, see
-    :func:`lag_resolved`). A shape whose time parameters are all 0 (``motor_lag``'s derivative form) comes with
-    the resolved ones: it stands for lags shorter than they are, which the log resolves no better."""
+    with the signals, the shapes whose time parameters ``keys`` [s] are at least :func:`shortest`. A shape whose
+    time parameters are all 0 (``motor_lag``'s derivative form, ``delay``'s velocity form) comes with the resolved
+    ones (unless ``zero_alone``): it stands for lags shorter than they are, which the log resolves no better. When
+    no shape with a positive time parameter is resolved: those zero forms alone, or the whole grid if there are
+    none (the effect's ``needs`` then says it cannot be told, see :func:`lag_resolved`)."""
 
     shapes: tuple[Mapping[str, float], ...]
     keys: tuple[str, ...]
+    zero_alone: bool = False
+    """The zero forms come only where no shape with a positive time parameter is resolved (``delay``'s velocity
+    form: beside a resolved delay it is a second look-alike of the command's velocity, which fits a derivative's
+    error on a clean log)."""
 
     def resolves(self, period: float | None) -> bool:
         """A shape with a positive time parameter is resolved at ``period`` [s]."""
@@ -392,16 +397,28 @@ class ResolvedGrid:
 
     def __call__(self, signals: Signals) -> tuple[Mapping[str, float], ...]:
         if not self.resolves(signals.dt):
-            return self.shapes
-        return tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
+            zero = tuple(g for g in self.shapes if not any(g.get(k, 0.0) for k in self.keys))
+            return zero or self.shapes
+        out = tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
+        if self.zero_alone:
+            out = tuple(g for g in out if any(g.get(k, 0.0) for k in self.keys))
+        return out
 
 
-def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
-    """Why the log's timing resolves no shape of ``grid`` (``what``: e.g. "delay"), or None: time steps that
-    jitter by more than ``JITTER_TOL``, or a sample period longer than every shape allows."""
+def steady_timing(e: Excitation, what: str) -> str | None:
+    """Why the log's timing cannot resolve a ``what`` (e.g. "delay") at all, or None: time steps that jitter by
+    more than ``JITTER_TOL``."""
     if e.period_jitter > JITTER_TOL:
         return (f"cannot tell: the time steps jitter by {100 * e.period_jitter:.0f} % of the period (more than "
                 f"{100 * JITTER_TOL:.0f} %): the timing cannot resolve a {what}")
+    return None
+
+
+def lag_resolved(e: Excitation, grid: ResolvedGrid, what: str) -> str | None:
+    """Why the log's timing resolves no shape of ``grid`` (``what``: e.g. "time constant"), or None: time steps
+    that jitter (:func:`steady_timing`), or a sample period longer than every shape allows."""
+    if reason := steady_timing(e, what):
+        return reason
     if grid.resolves(e.period):
         return None
     ranges = []

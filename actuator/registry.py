@@ -96,6 +96,8 @@ class Effect:
         phi_unit: Unit of the regressor ``phi``: ``"1"`` dimensionless, ``"target"`` the target's own unit, else a
             unit (``"N m"``, ``"rad/s^2"``); the coefficient is in [target unit / unit of phi]. A mapping when the
             unit depends on the shape: ``{form: unit}`` (e.g. ``thermal_drift``'s two forms). None: not given.
+        shape_text: ``shape_text(coefficient, shape) -> str``: how a fitted term reads in a verdict where its shape
+            alone would mislead (``delay``'s velocity form: the dead time its coefficient gives). None: the shape.
     """
 
     name: str
@@ -121,6 +123,7 @@ class Effect:
     signal_substitutes: Mapping[str, str] = field(default_factory=dict)
     experiments: Mapping[str, str] = field(default_factory=dict)
     phi_unit: str | Mapping[str, str] | None = None
+    shape_text: Callable[[float, Mapping[str, float]], str] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() or self.name in RESERVED:

@@ -90,12 +90,27 @@ def test_lag_shapes_need_the_sample_period_to_resolve_them():
         grid = get_effect(name).grid
         assert isinstance(grid, ResolvedGrid)
         s1 = _servo_log(1e-3)
-        assert len(get_effect(name).grid_for(s1)) == len(grid.shapes)  # 1 kHz resolves every shape
+        zero = [g for g in grid.shapes if not any(g.get(k, 0.0) for k in grid.keys)] if grid.zero_alone else []
+        assert len(get_effect(name).grid_for(s1)) == len(grid.shapes) - len(zero)  # 1 kHz resolves every shape
+        if name == "delay":
+            assert zero == [{"delay": 0.0}]  # the velocity form only where no delay is resolved
+            continue
         e = excitation_report(_servo_log(0.1))
         reason = get_effect(name).needs(e)
         assert reason is not None and reason.startswith("cannot tell: the sample period 100 ms resolves no"), name
     shapes = get_effect("delay").grid_for(_servo_log(7e-3))
     assert [g["delay"] for g in shapes] == [0.02]  # 2 periods = 14 ms: only the 20 ms delay
+
+
+def test_a_delay_the_period_does_not_resolve_is_tested_in_its_velocity_form():
+    """At 100 ms no delay of the grid is resolved: the velocity form alone is offered and the delay stays testable
+    (fast motion allowed); time steps that jitter still make it untestable, saying so."""
+    s = _servo_log(0.1)
+    assert get_effect("delay").grid_for(s) == ({"delay": 0.0},)
+    e = excitation_report(s)
+    assert get_effect("delay").needs(e) is None
+    reason = get_effect("delay").needs(replace(e, period_jitter=0.5))
+    assert reason.startswith("cannot tell: the time steps jitter by 50 %") and "resolve a delay" in reason
 
 
 def test_cogging_needs_positions_sampled_densely():

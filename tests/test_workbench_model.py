@@ -90,13 +90,13 @@ def _assert_online_equals_batch(m: MotorModel, c, ddq) -> np.ndarray:
     return batch
 
 
-@pytest.mark.parametrize("effect", ["motor_lag", "saturation"])
+@pytest.mark.parametrize("effect", ["motor_lag", "saturation", "delay"])
 def test_online_matches_the_batch_one_in_the_other_forms(effect):
-    """motor_lag's derivative form (time_constant 0: the last tick of u_tau) and saturation with beta 0 (the logged
-    torque is the motor's; the term grows only in the torque's direction) are evaluated on-line as in batch, and
-    the term is not zero on the log."""
+    """motor_lag's derivative form (time_constant 0: the last tick of u_tau), saturation with beta 0 (the logged
+    torque is the motor's; the term grows only in the torque's direction) and delay's velocity form (delay 0: the
+    command's last step over the period) are evaluated on-line as in batch, and the term is not zero on the log."""
     c, ddq = signals(1.0)
-    shape = {"time_constant": 0.0} if effect == "motor_lag" else {
+    shape = {"motor_lag": {"time_constant": 0.0}, "delay": {"delay": 0.0}}.get(effect) or {
         "tau_sat": float(np.quantile(np.abs(c["tau"]), 0.8)), "beta": 0.0, "release": 0.8}
     m = replace(model_with(), extra={effect: EffectTerm(model_with(effect).extra[effect].coefficient, shape)})
     batch = _assert_online_equals_batch(m, c, ddq)

@@ -375,7 +375,8 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
             text = EXPERIMENTS.get(frozenset((top.effect, second.effect)),
                                    "excite the two effects separately (see docs/workbench.md, effect library)")
             confusion = Confusion((top.effect, second.effect), (top.heldout_gain, second.heldout_gain), corr, text)
-        shape = ", ".join(f"{k} = {v:.3g}" for k, v in top.shape.items())
+        shape = (eff.shape_text(top.coefficient, top.shape) if eff.shape_text is not None
+                 else ", ".join(f"{k} = {v:.3g}" for k, v in top.shape.items()))
         message = (f"missing effect: {top.effect}" + (f" ({shape})" if shape else "")
                    + f" removes {100 * top.heldout_gain:.0f} % of the held-out error")
         if top.partial:
