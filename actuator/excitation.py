@@ -390,19 +390,19 @@ class ResolvedGrid:
     form: beside a resolved delay it is a second look-alike of the command's velocity, which fits a derivative's
     error on a clean log)."""
 
+    def _timed(self, shape: Mapping[str, float]) -> bool:
+        """``shape`` has a positive time parameter (it is not a zero form)."""
+        return any(shape.get(k, 0.0) > 0.0 for k in self.keys)
+
     def resolves(self, period: float | None) -> bool:
         """A shape with a positive time parameter is resolved at ``period`` [s]."""
-        return any(resolvable(g, self.keys, period) and any(g.get(k, 0.0) > 0.0 for k in self.keys)
-                   for g in self.shapes)
+        return any(resolvable(g, self.keys, period) and self._timed(g) for g in self.shapes)
 
     def __call__(self, signals: Signals) -> tuple[Mapping[str, float], ...]:
         if not self.resolves(signals.dt):
-            zero = tuple(g for g in self.shapes if not any(g.get(k, 0.0) for k in self.keys))
-            return zero or self.shapes
+            return tuple(g for g in self.shapes if not self._timed(g)) or self.shapes
         out = tuple(g for g in self.shapes if resolvable(g, self.keys, signals.dt))
-        if self.zero_alone:
-            out = tuple(g for g in out if any(g.get(k, 0.0) for k in self.keys))
-        return out
+        return tuple(g for g in out if self._timed(g)) if self.zero_alone else out
 
 
 def steady_timing(e: Excitation, what: str) -> str | None:
