@@ -8,8 +8,9 @@ lag (``LAG_COEFFICIENT``; a positive one would be a lead, not this effect). Only
 damping ``k_v dq`` acts on the measured velocity.
 
 The lag form is a derivative only below ``1 / (2 pi time_constant)``; a stiff servo's torque moves faster. The
-derivative form (``time_constant = 0``, the form's limit) is ``phi = u_tau(t - 1 tick) - u_tau(t)``, about
-``-period d(u_tau)/dt`` at every frequency the log resolves: its coefficient is ``-T / period``. On-line: ``tau``
+derivative form (``time_constant = 0``, the form's limit) is ``phi = (u_tau(t - 1 tick) - u_tau(t)) / period``,
+about ``-d(u_tau)/dt`` at every frequency the log resolves: its coefficient is ``T`` [s] with a minus sign, the same
+at any sample period (a controller running at another rate than the log applies it as fitted). On-line: ``tau``
 and its history (a first-order lag, or the last tick's ``u_tau``).
 """
 
@@ -31,26 +32,26 @@ LAG_COEFFICIENT = (float("-inf"), 0.0)  # -T / time_constant: a lag, never a lea
 
 def motor_lag(s: Signals, time_constant: float) -> np.ndarray:
     u = s["u_tau"]
-    if time_constant == 0.0:
-        s.require_dt("motor_lag")  # the derivative form reads the last tick: a uniform sampling
-        return delayed(u, 1, s.starts) - u
+    if time_constant == 0.0:  # the derivative form reads the last tick: a uniform sampling
+        return (delayed(u, 1, s.starts) - u) / s.require_dt("motor_lag")
     return lowpass(u, time_constant, s.require_dt("motor_lag"), starts=s.starts) - u
 
 
-def time_constant_of(coefficient: float, shape: Mapping[str, float], period: float) -> float:
-    """The lag ``T`` [s] a fitted ``coefficient`` of ``shape`` gives on a log sampled every ``period`` [s]:
-    ``-coefficient`` times the shape's time constant, or times the period in the derivative form."""
-    return -coefficient * (shape["time_constant"] or period)
+def time_constant_of(coefficient: float, shape: Mapping[str, float]) -> float:
+    """The lag ``T`` [s] a fitted ``coefficient`` of ``shape`` gives: ``-coefficient`` times the shape's time
+    constant, or ``-coefficient`` itself in the derivative form."""
+    return -coefficient * (shape["time_constant"] or 1.0)
 
 
 class MotorLagOnline(OnlineLag):
     def __init__(self, shape: Mapping[str, float], period: float):
         super().__init__(shape["time_constant"], period, None)
         self.derivative = shape["time_constant"] == 0.0
+        self.period = period
 
     def value(self, x: Mapping[str, float]) -> float:
         if self.derivative:
-            return 0.0 if self.y is None else self.y - x["u_tau"]
+            return 0.0 if self.y is None else (self.y - x["u_tau"]) / self.period
         return self._next(x["u_tau"]) - x["u_tau"]
 
     def commit(self, x: Mapping[str, float]) -> None:
@@ -74,5 +75,5 @@ EFFECT = Effect(
     online_signals="tau (history: a first-order lag)",
     coefficient_range=LAG_COEFFICIENT,
     confusable=("delay", "elastic"),
-    phi_unit="target",
+    phi_unit={"time_constant 0 (the derivative form: the coefficient is -T)": "rad/s", "time_constant > 0": "target"},
 )
