@@ -29,7 +29,8 @@ def fit_with_loss(
         loss: :class:`Loss` to minimise.
         offset: Known part of the model [rad], or None.
         solver: Asymmetric solver, ``"newton"`` or ``"osqp"`` (ignored for least squares).
-        **kwargs: ``min_samples``, ``max_condition`` and solver options.
+        **kwargs: ``min_samples``, ``max_condition``, ``constant`` (columns that may be constant: a fitted offset)
+            and solver options.
     """
     if loss.kind == "least_squares":
         return fit_least_squares(regressors, dq_err, offset=offset, **kwargs)

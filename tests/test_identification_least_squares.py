@@ -43,6 +43,20 @@ def test_general_named_columns_and_offset():
     np.testing.assert_allclose(fit.predict(Regressors(("p", "q"), a)), a @ [3.0, -2.0], rtol=1e-9, atol=1e-12)
 
 
+def test_a_constant_column_named_as_constant_is_fitted_as_an_offset():
+    """Through fit_with_loss, as the asymmetric fit: a column of ones named in ``constant`` is fitted (an exact
+    model with a 3e-4 rad offset comes back to 1e-9); not named, it is refused as unexcited."""
+    from servotau.identification import Loss, fit_with_loss
+
+    tau, dq = exact_data()
+    a = Regressors(("k_tau", "k_v", "offset"), np.column_stack([tau, dq, np.ones_like(tau)]))
+    y = 2.12e-4 * tau + 0.013 * dq + 3e-4
+    fit = fit_with_loss(a, y, Loss.least_squares(), constant=("offset",))
+    np.testing.assert_allclose(fit.x, [2.12e-4, 0.013, 3e-4], rtol=1e-9)
+    with pytest.raises(IdentificationError, match="column 'offset' is constant"):
+        fit_least_squares(a, y)
+
+
 def test_least_squares_is_the_minimiser():
     """On noisy data the fit equals numpy's lstsq solution (no bias from the internal scaling)."""
     tau, dq = exact_data(500, seed=3)
