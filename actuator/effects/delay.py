@@ -54,7 +54,7 @@ class DelayOnline:
     def __init__(self, shape: Mapping[str, float], period: float):
         self.velocity_form = shape["delay"] == 0.0
         self.period = period
-        self.n = ticks(shape["delay"], period)
+        self.n = 1 if self.velocity_form else ticks(shape["delay"], period)  # commands kept
         self.buf: list[float] = []
 
     def _old(self, q_des: float) -> float:
