@@ -27,7 +27,6 @@ import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
-from scipy.signal import lfilter
 
 from servotau.errors import IdentificationError
 from servotau.signal.savgol import savgol_centred, savgol_centred_runs
@@ -174,6 +173,8 @@ def lowpass(x: np.ndarray, time_constant: float, dt: float, y0: float | None = N
             starts: Sequence[int] | None = None) -> np.ndarray:
     """First-order lag ``y[k] = y[k-1] + a (x[k] - y[k-1])`` with ``y[-1] = y0`` (default ``x[0]``), restarted
     the same way at each run's start (``y0`` default: the run's first sample)."""
+    from scipy.signal import lfilter  # here: importing scipy.signal takes about a second
+
     a = lowpass_gain(time_constant, dt)
     y, _ = lfilter([a], [1.0, -(1.0 - a)], x, zi=[(1.0 - a) * (float(x[0]) if y0 is None else y0)])
     if starts is not None and len(starts) > 1:

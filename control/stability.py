@@ -41,6 +41,7 @@ from functools import lru_cache
 import numpy as np
 
 from servotau.errors import ControlError
+from servotau.signal.savgol import savgol_coeffs
 
 # (k_tau, k_v) of the true servo relative to the model's: the asymmetric fit under-estimates both by up to ~20 %
 # (docs/identification.md), and a servo drifts; the tuning must hold on all of them.
@@ -83,8 +84,6 @@ class LoopModel:
 @lru_cache(maxsize=16)
 def _taps(window: int, order: int, deriv: int, period: float) -> np.ndarray:
     """Last-sample Savitzky-Golay ``deriv``-th derivative as FIR taps on ``x[k - i]``, ``i = 0 .. W-1``."""
-    from scipy.signal import savgol_coeffs
-
     c = savgol_coeffs(window, order, deriv=deriv, delta=period, pos=window - 1, use="dot")[::-1].copy()
     c.setflags(write=False)
     return c

@@ -83,6 +83,15 @@ def test_every_library_module_loads_neither_the_simulator_nor_the_applications()
     assert bad == {}
 
 
+def test_importing_the_libraries_leaves_scipy_signal_unloaded():
+    """Importing scipy.signal takes about a second (half of a controller's start): the libraries import it only
+    inside the functions that filter a whole recording (centred filters, the first-order lag, a task's lag check),
+    so that a process which filters causally, such as the controller, never loads it."""
+    code = "import importlib, json, sys\nfor n in sys.argv[1:]: importlib.import_module(n)\n" \
+           "print(json.dumps(sorted(m for m in sys.modules if m == 'scipy.signal')))"
+    assert _run(code, *LIBRARIES, "servotau.control.tasks", "servotau.identification.workbench") == []
+
+
 # -- module size ---------------------------------------------------------------------------------------------
 MAX_LINES = 500
 

@@ -14,6 +14,7 @@ from servotau.signal.savgol import (
     delay,
     savgol_centred,
     savgol_centred_runs,
+    savgol_coeffs,
 )
 
 DT = 1e-3  # [s]
@@ -23,6 +24,25 @@ def poly_and_derivs(coefs: np.ndarray, t: np.ndarray) -> list[np.ndarray]:
     """Values of a polynomial (numpy.polynomial order) and of its first two derivatives at t."""
     p = np.polynomial.Polynomial(coefs)
     return [p(t), p.deriv(1)(t), p.deriv(2)(t)]
+
+
+def test_coefficients_equal_scipys_to_the_bit():
+    """savgol_coeffs solves scipy.signal.savgol_coeffs' problem with its solver: the same numbers, so that the
+    filters give what they gave with scipy's (windows 1 .. 201, orders 0 .. 5, every derivative, both uses)."""
+    from scipy.signal import savgol_coeffs as scipy_coeffs
+
+    n = 0
+    for window in (*range(1, 26), 41, 80, 81, 201):
+        for order in range(min(window, 6)):
+            for deriv in range(order + 2):  # deriv > order: zeros
+                for pos in (None, 0.0, (window - 1) / 2, float(window - 1), float(window // 3)):
+                    for use in ("dot", "conv"):
+                        for delta in (1.0, 1e-3, 0.0137):
+                            want = scipy_coeffs(window, order, deriv=deriv, delta=delta, pos=pos, use=use)
+                            assert np.array_equal(savgol_coeffs(window, order, deriv, delta, pos, use), want), \
+                                (window, order, deriv, pos, use, delta)
+                            n += 1
+    assert n > 10_000
 
 
 @pytest.mark.parametrize("eval_at", ["last", "centre"])

@@ -34,11 +34,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicHermiteSpline
-from scipy.signal import lfilter, savgol_coeffs
 
 from servotau.actuator import MotorModel
 from servotau.hal.types import RobotInfo
+from servotau.signal.savgol import savgol_coeffs
 
 from ..config import SafetyLimits
 from ..dynamics import RobotDynamics
@@ -123,6 +122,9 @@ class LagModel:
     def _estimated(self, ts, q, dq, ddq, tau, err, m_jj) -> tuple[np.ndarray, np.ndarray]:
         """The largest estimated speed and torque (n,): the encoder filter on the servo's response and on the
         reference, at the control period (module doc); the torque ``tau + M_jj (ddq_hat - ddq_d)`` per joint."""
+        from scipy.interpolate import CubicHermiteSpline  # here: scipy.interpolate and scipy.signal take about
+        from scipy.signal import lfilter  # a second to import, and only a task's start needs them
+
         dt, idx, w = self.period, self.index, self.window
         fine = np.arange(0.0, ts[-1], dt)
         q_ref = CubicHermiteSpline(ts, q, dq, axis=0)(fine)

@@ -3,7 +3,9 @@
 A Savitzky-Golay (SG) filter fits a polynomial of degree ``order`` by least squares to the last
 ``window`` samples and returns the value or a derivative of that polynomial at one point of the
 window. With a constant sampling period the fit is a fixed linear map, so every estimate is one
-dot product with coefficients computed once by :func:`scipy.signal.savgol_coeffs`.
+dot product with coefficients computed once by :func:`savgol_coeffs` (the least-squares solve of
+:func:`scipy.signal.savgol_coeffs`, without importing :mod:`scipy.signal`, whose import takes about a second:
+a process that only filters causally, such as the controller, never pays it).
 
 The paper uses 80-sample windows at 1 kHz, order 2 for the encoders (q, dq, ddq) and order 1 for
 the IMU and the F/T sensors (section 5.1; Algorithm 1 writes order 0 for the F/T sensors).
@@ -38,13 +40,35 @@ import math
 from typing import Literal
 
 import numpy as np
+from scipy.linalg import lstsq
 from scipy.ndimage import correlate1d
-from scipy.signal import savgol_coeffs, savgol_filter
 
 from servotau.errors import EstimationError
 
 EvalAt = Literal["last", "centre"]
 _EVAL_AT = ("last", "centre")
+
+
+def savgol_coeffs(window: int, order: int, deriv: int = 0, delta: float = 1.0, pos: float | None = None,
+                  use: Literal["dot", "conv"] = "dot") -> np.ndarray:
+    """Coefficients of the SG filter that fits a polynomial of degree ``order`` to ``window`` samples and
+    returns its ``deriv``-th derivative [unit / s**deriv] at sample ``pos`` of the window (0 = oldest; default:
+    the middle), for samples ``delta`` [s] apart; ``use="dot"`` for a dot product with the samples oldest first,
+    ``"conv"`` for a convolution. The same least-squares problem and solver as
+    :func:`scipy.signal.savgol_coeffs` (a test checks the two equal to the bit). Arguments are not checked
+    (callers check them)."""
+    if pos is None:
+        pos = (window - 1) / 2
+    if deriv > order:
+        return np.zeros(window)
+    x = np.arange(-pos, window - pos, dtype=float)  # sample times relative to pos, in samples
+    if use == "conv":
+        x = x[::-1]
+    a = x ** np.arange(order + 1, dtype=float).reshape(-1, 1)  # row k: x**k
+    y = np.zeros(order + 1)
+    y[deriv] = float(math.factorial(deriv)) / delta**deriv
+    coeffs, *_ = lstsq(a, y, cond=np.finfo(float).eps * max(a.shape))
+    return coeffs
 
 
 def _check_int(name: str, value: object, minimum: int) -> int:
@@ -165,6 +189,8 @@ def savgol_centred(x: np.ndarray, window: int, order: int, dt: float, deriv: int
         raise EstimationError(f"x has {x.shape[0]} samples: expected at least window={window}")
     if not np.all(np.isfinite(x)):
         raise EstimationError("x contains NaN or inf: expected finite samples")
+    from scipy.signal import savgol_filter  # here: importing scipy.signal takes about a second
+
     return savgol_filter(x, window, order, deriv=deriv, delta=float(dt), axis=0, mode="interp")
 
 
