@@ -45,6 +45,7 @@ class InProcessBackend(Backend):
         self._servo_off = False
         self._want_truth = False  # ground_truth() was called: keep the truth of each stepped tick
         self._truth_before_step = None  # (seq, GroundTruth) of the last stepped tick
+        self._truth_now = None  # (seq, GroundTruth) of the current tick, once asked (the robot has not stepped since)
         self._log = None
         if log:
             self._log = LogWriter(log, robot.info, truth=True, extra=LOG_EXTRA,
@@ -53,7 +54,9 @@ class InProcessBackend(Backend):
 
     def _step(self) -> None:
         frame, fw = self._current, self.firmware
-        truth = self.robot.ground_truth() if self._log is not None or self._want_truth else None
+        truth = None
+        if self._log is not None or self._want_truth:
+            truth = self._truth_now[1] if self._truth_now and self._truth_now[0] == frame.seq else self._truth_of_now()
         if self._want_truth:
             self._truth_before_step = (frame.seq, truth)
         q_apply = fw.output(frame.q, frame.time, int(frame.status[0]))
@@ -119,10 +122,16 @@ class InProcessBackend(Backend):
         self._want_truth = True
         last = self._last_read
         if last is None or last.seq == self._current.seq:
-            return self.robot.ground_truth()
+            return self._truth_of_now()
         if self._truth_before_step is not None and self._truth_before_step[0] == last.seq:
             return self._truth_before_step[1]
         return None
+
+    def _truth_of_now(self) -> GroundTruth:
+        """The robot's ground truth of the current tick, kept until it steps (a collection asks for it before the step
+        that logs it)."""
+        self._truth_now = (self._current.seq, self.robot.ground_truth())
+        return self._truth_now[1]
 
     @property
     def robot_state(self) -> str:
