@@ -38,7 +38,7 @@ def test_a_lead_is_not_a_motor_lag():
 def test_a_current_loop_lag_of_an_independent_plant_is_named_with_its_time_constant():
     """servotau/experiments/plant_family.py (written without the workbench) with a 20 ms current loop: the
     workbench names motor_lag, and its coefficient gives the time constant (-coefficient x the shape's, or
-    -coefficient itself in the derivative form)."""
+    -coefficient itself in the derivative form), which the verdict prints."""
     from servotau.actuator.effects.motor_lag import time_constant_of
     from servotau.experiments import plant_family as pf
 
@@ -49,6 +49,8 @@ def test_a_current_loop_lag_of_an_independent_plant_is_named_with_its_time_const
     assert d.verdict == "missing_effect" and d.top.effect == "motor_lag"
     t_fit = time_constant_of(d.top.coefficient, d.top.shape)
     assert abs(t_fit / plant.effect["motor_lag"]["T"] - 1) < 0.25
+    form = "derivative form" if d.top.shape["time_constant"] == 0.0 else "lag form"
+    assert f"motor_lag ({form}" in d.message and f"time constant {1e3 * t_fit:.3g} ms)" in d.message, d.message
 
 
 def test_a_model_without_k_tau_cannot_test_a_torque_lag():

@@ -43,6 +43,14 @@ def time_constant_of(coefficient: float, shape: Mapping[str, float]) -> float:
     return -coefficient * (shape["time_constant"] or 1.0)
 
 
+def shape_text(coefficient: float, shape: Mapping[str, float]) -> str:
+    """The verdict's words for a fitted term: the time constant ``T`` its coefficient gives, and the form."""
+    t_ms = 1e3 * time_constant_of(coefficient, shape)
+    if shape["time_constant"] == 0.0:
+        return f"derivative form: time constant {t_ms:.3g} ms"
+    return f"lag form {1e3 * shape['time_constant']:.3g} ms: time constant {t_ms:.3g} ms"
+
+
 class MotorLagOnline(OnlineLag):
     def __init__(self, shape: Mapping[str, float], period: float):
         super().__init__(shape["time_constant"], period, None)
@@ -74,6 +82,7 @@ EFFECT = Effect(
     history=True,
     online_signals="tau (history: a first-order lag)",
     coefficient_range=LAG_COEFFICIENT,
+    shape_text=shape_text,
     confusable=("delay", "elastic"),
     phi_unit={"time_constant 0 (the derivative form: the coefficient is -T)": "rad/s", "time_constant > 0": "target"},
 )
