@@ -114,6 +114,7 @@ def simulate_log(
     n = int(round(plan.seconds / dt))
     out = {k: np.empty(n) for k in ("t", "q", "q_des", "true/tau", "true/dq", "true/current", "true/q", "segment")}
     q_cmd = q0.copy()
+    g = robot.ground_truth()  # the state before the first step; then each step's truth is the next one's before
     for k in range(n):
         t = k * dt
         c = min(int(t // T), plan.cycles - 1)
@@ -124,7 +125,6 @@ def simulate_log(
         # torque the servo produced during that period.
         out["t"][k] = robot.time
         out["q"][k] = robot.read().q[j]
-        g = robot.ground_truth()
         out["true/dq"][k] = g.dq[j]
         out["true/q"][k] = g.q[j]
         out["q_des"][k] = q_cmd[j]
