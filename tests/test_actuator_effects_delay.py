@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from servotau.actuator import Signals, get_effect
-from servotau.actuator.effects.delay import delay_of
+from servotau.actuator.effects.delay import delay_of, shape_text
 from servotau.identification.workbench import diagnose, load_dataset, parse_spec
 
 
@@ -23,6 +23,13 @@ def test_the_velocity_form_is_the_commands_last_step_over_the_period():
     expected[50] = 0.0
     np.testing.assert_allclose(col, expected)
     assert delay_of(0.006, {"delay": 0.0}) == 0.006 and delay_of(0.9, {"delay": 0.01}) == pytest.approx(0.009)
+
+
+def test_the_verdict_reads_the_dead_time_in_milliseconds_in_both_forms():
+    """The grid form's coefficient is the fraction of its delay that the dead time is: 0.425 of 20 ms reads 8.5 ms
+    (it read "delay = 0.02", the grid's value without unit, in a black-box trial)."""
+    assert shape_text(0.425, {"delay": 0.02}) == "delay 20 ms: dead time 8.5 ms"
+    assert shape_text(0.0063, {"delay": 0.0}) == "velocity form: dead time 6.3 ms"
 
 
 @pytest.mark.parametrize("hidden", [("delay",), ()])

@@ -42,10 +42,11 @@ def delay_of(coefficient: float, shape: Mapping[str, float]) -> float:
 
 
 def shape_text(coefficient: float, shape: Mapping[str, float]) -> str:
-    """The verdict's words for a fitted term: the velocity form names the dead time its coefficient gives."""
+    """The verdict's words for a fitted term: the dead time its coefficient gives, and the form."""
+    dead_ms = 1e3 * delay_of(coefficient, shape)
     if shape["delay"] == 0.0:
-        return f"velocity form: dead time {1e3 * delay_of(coefficient, shape):.3g} ms"
-    return f"delay = {shape['delay']:.3g}"
+        return f"velocity form: dead time {dead_ms:.3g} ms"
+    return f"delay {1e3 * shape['delay']:.3g} ms: dead time {dead_ms:.3g} ms"
 
 
 class DelayOnline:
