@@ -90,6 +90,18 @@ def test_constant_torque_is_not_used_and_said():
     d = _diagnose(ds, ["coulomb", "backlash", "load_friction"])
     assert "not in the log" in d.candidate("backlash").reason
     assert d.verdict == "missing_effect" and d.top.effect == "coulomb"  # K_TAU tau is 0: coulomb is the truth
+    assert "the log has no torque" in d.message and "may stand for the servo's load" in d.message, d.message
+
+
+def test_a_servo_log_without_torque_says_an_effect_may_stand_for_the_load():
+    """A log without its torque column (a clean servo under load): the model has no k_tau tau, so whatever it names
+    may be the load's part (a black-box trial's plant named elastic with no warning); the caveat is in the message and
+    the checks, and a log with torque has none."""
+    cols = _table()
+    no_tau = load_dataset({k: v for k, v in cols.items() if k != "tau"})
+    d = _diagnose(no_tau)
+    assert "the log has no torque" in d.message and any("the log has no torque" in c for c in d.checks)
+    assert "the log has no torque" not in _diagnose(load_dataset(cols)).message
 
 
 def test_constant_velocity_column_is_replaced_by_the_derivative_of_q():

@@ -54,6 +54,11 @@ tested where each of them removes at most this share of the held-out error it re
 OFFSET_PROBE = "with a constant offset in the model, which it lacks"
 """How a check over the model with an offset is named in its sentence: a probe's (:func:`recheck_probes`) or an
 effect's (:func:`~.diagnose._checked`)."""
+CANNOT_TELL = "cannot tell which effect: "
+"""How a ``cannot_tell`` message starts: its reasons follow, then the ranking as the log reads."""
+NO_TORQUE = ("the log has no torque (no column, or one that never changes): the model has no k_tau tau, so an effect "
+             "named may stand for the servo's load (gravity, inertia); a torque column tells them apart")
+"""The caveat in the checks of a servo-error log without torque."""
 
 CHECKED_PROBES = ("dynamics", "memory")
 """Probes that the preprocessing's own error can feed (lagged inputs; the residual's past, smooth over the
@@ -351,8 +356,18 @@ def recheck_probes(ds: Dataset, spec: ModelSpec, loss, folds: list[Fold], probes
     return out, tuple(notes), tuple(constant)
 
 
+def _cannot_tell(reason: str, message: str) -> str:
+    """The message of a ``cannot_tell`` verdict: the reason, then what the ranking says as the log reads (its
+    verdict would be misread as the answer), or the earlier reasons."""
+    if message.startswith(CANNOT_TELL):
+        return f"{CANNOT_TELL}{reason}; {message[len(CANNOT_TELL):]}"
+    return f"{CANNOT_TELL}{reason}; the ranking as the log reads: {message}"
+
+
 def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str, ...] = (),
                then: Candidate | None = None, constant_probes: tuple[str, ...] = ()) -> Diagnosis:
+    if ds.actuator and not ds.has_torque:
+        checks = (*checks, NO_TORQUE)
     named = [c for c in ranking if nameable(c, min_gain)]
     experiments = {}
     confusion = None
@@ -427,17 +442,16 @@ def verdict_of(ds, spec, base, ranking, probes, exc, min_gain, checks: tuple[str
     if verdict == "no_missing_effect" and constant_probes:  # (recheck_probes) they found only a constant
         found = (f"the {constant_probes[0]} probe finds" if len(constant_probes) == 1 else
                  f"the {', '.join(constant_probes[:-1])} and {constant_probes[-1]} probes find")
-        verdict, message = "cannot_tell", ("cannot tell which effect: a constant error, which the model lacks, "
-                                           f"stands in for what {found} ({OFFSET_ADVICE}); " + message)
+        verdict, message = "cannot_tell", _cannot_tell(f"a constant error, which the model lacks, stands in for what "
+                                                       f"{found} ({OFFSET_ADVICE})", message)
     if exc.unit_doubts:
-        verdict, message = "cannot_tell", ("cannot tell which effect: units doubted (" + "; ".join(exc.unit_doubts)
-                                           + "); " + message)
+        verdict, message = "cannot_tell", _cannot_tell(f"units doubted ({'; '.join(exc.unit_doubts)})", message)
     faults = list(exc.faults)
     y = ds.target
     if not faults and y.size and np.ptp(y) == 0.0:  # e.g. q_des logged as a copy of q
         faults.append(f"the target never changes (= {y[0]:.6g}): there is no error to model")
     if faults:
-        verdict, message = "cannot_tell", "cannot tell which effect: " + "; ".join(faults) + "; " + message
+        verdict, message = "cannot_tell", _cannot_tell("; ".join(faults), message)
     return Diagnosis(verdict, base, ranking, probes, exc, min_gain, confusion, message, experiments, _tail(ds, base)[0],
                      checks, then if verdict == "missing_effect" else None)
 
