@@ -81,8 +81,12 @@ def test_bad_input_names_the_column_and_the_expected_value(tmp_path):
     bad = dict(cols)
     bad["t"] = cols["t"].copy()
     bad["t"][100] = bad["t"][99]
-    with pytest.raises(IdentificationError, match="column 't' \\(role time\\): not increasing at row 100"):
+    with pytest.raises(IdentificationError, match="column 't' \\(role time\\): not increasing at row 100.*several"):
+        load_dataset(bad)  # the same time twice: two servos logged in one file, say
+    bad["t"][100] = bad["t"][99] - 1e-3
+    with pytest.raises(IdentificationError, match="not increasing at row 100") as backwards:
         load_dataset(bad)
+    assert "several joints" not in str(backwards.value)
     allnan = dict(cols, tau=np.full(len(cols["t"]), np.nan))
     with pytest.raises(IdentificationError, match="column 'tau' \\(role torque\\): all 2000 values are NaN"):
         load_dataset(allnan)

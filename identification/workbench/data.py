@@ -229,6 +229,8 @@ def load_dataset(
             raise IdentificationError(
                 f"column '{roles['time']}' (role time): not increasing at row {k + 1} ({t[k]} -> {t[k + 1]}): "
                 "expected strictly increasing time [s]"
+                + ("; the same time twice: several joints or recordings in one file? (split it, one per file)"
+                   if steps[k] == 0 else "")
             )
         dt = float(np.median(steps))
     runs = segments(used["time"] if "time" in roles else None, dt, valid=valid, max_gap=RUN_GAP)
