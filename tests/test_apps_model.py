@@ -113,6 +113,8 @@ def test_plugin_effect_and_column_mapping(capsys, tmp_path):
         (["--plugin", "/nonexistent.py"], "--plugin /nonexistent.py: file not found"),
         (["--rerun", "nowhere"], "--rerun 'nowhere': expected save:FILE"),
         (["--map", "torque=tau", "--map", "torque=q"], "role torque is already mapped to column 'tau'"),
+        (["--smooth-torque", "-0.01"], "--smooth-torque -0.01: expected a window >= 0 s"),
+        (["--smooth-torque", "inf"], "--smooth-torque inf: expected a window >= 0 s"),
         (["--align-torque", "-1"], "--align-torque -1.0: expected a search range >= 0 s"),
         (["--align-torque", "nan"], "--align-torque nan: expected a search range >= 0 s"),
         (["--test", "{log}"], "cog.parquet: the same file as log "),
@@ -234,3 +236,19 @@ def test_simulate_refuses_an_unknown_output_format_before_simulating(capsys, tmp
     monkeypatch.setattr(simlog, "simulate_log", no_simulation)
     assert main(["model", "simulate", str(tmp_path / "x.txt"), "--quiet"]) == 2
     assert "unknown format '.txt': expected .parquet or .csv" in capsys.readouterr().err
+
+
+def test_the_torque_smoothing_can_be_given_or_turned_off(capsys, tmp_path):
+    """--smooth-torque S: the torque's window is the one given (0: not smoothed) instead of the one chosen by
+    cross-validation, and the notes say which (the window chosen for a Coulomb plant's torque noise blurred its
+    reversals in a black-box trial, with no way to change it)."""
+    log = str(write_table(synthetic_table(seconds=3.0), tmp_path / "servo.csv"))
+    base = ["model", "compare", log, "--json", "--quiet"]
+    notes = {}
+    for option in ([], ["--smooth-torque", "0.021"], ["--smooth-torque", "0"]):
+        out, _ = run_json(capsys, base + option)
+        notes[tuple(option)] = [n for n in out["data"]["notes"] if n.startswith("tau:")]
+    assert "chosen by cross-validation" in notes[()][0]
+    assert notes[("--smooth-torque", "0.021")] == [
+        "tau: centred Savitzky-Golay smoothing (21 samples = 21 ms, order 2, no delay, given)"]
+    assert notes[("--smooth-torque", "0")] == []

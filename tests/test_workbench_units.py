@@ -128,13 +128,17 @@ def test_several_recordings_are_held_out_one_by_one(capsys, tmp_path):
 
 
 def test_a_model_fitted_on_some_recordings_is_scored_on_another(capsys, tmp_path):
-    """--test LOG: the final model, fitted on the other recordings, scored on it (no refit)."""
+    """--test LOG: the final model, fitted on the other recordings, scored on it (no refit); the report's table
+    has its row."""
     a, b, c = _friction_recordings(tmp_path)
     assert main(["model", "add", str(a), str(b), "--test", str(c), "--map", "time=t", "--map", "velocity=v",
-                 "--map", "target=friction", "--base", "coulomb", "--json", "--quiet"]) == 0
+                 "--map", "target=friction", "--base", "coulomb", "--json", "--quiet", "--report",
+                 str(tmp_path / "report")]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["test"]["source"].endswith("rec2.csv") and out["test"]["n"] == 2000
     assert out["test"]["rms"] < 0.03 and out["test"]["model"] == out["model"]
+    page = (tmp_path / "report" / "index.html").read_text()
+    assert f"{out['model']} (test: {out['test']['source']}, not fitted on it)" in page
     assert main(["model", "compare", str(a), "--test", str(c), "--map", "time=t", "--map", "velocity=v",
                  "--map", "target=friction", "--quiet"]) == 0
     assert "test " in capsys.readouterr().out

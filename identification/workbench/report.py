@@ -227,10 +227,12 @@ def write_report(
     title: str = "servotau model workbench",
     summary: dict | None = None,
     unit: Unit | None = None,
+    test: tuple[str, Metrics] | None = None,
 ) -> Path:
     """Write ``index.html`` and its plots into ``out_dir``; return the HTML path.
 
     ``unit``: how errors are scaled and labelled (default: from the target's role, :func:`.units.unit_of`).
+    ``test``: a row of the metrics table for recordings the model was scored on but not fitted on (label, metrics).
     """
     u = unit or unit_of(ds)
     out = Path(out_dir)
@@ -253,6 +255,8 @@ def write_report(
     for label, c in models:
         rows.append(_metrics_row(f"{label} (training)", c.train, u))
         rows.append(_metrics_row(f"{label} (held-out)", c.heldout, u))
+    if test is not None:
+        rows.append(_metrics_row(*test, u))
     parts.append(f"<p>Error: {html.escape(u.quantity)} [{html.escape(u.symbol)}]</p>"
                  f"<table><tr><th>model</th><th>fit [%]</th><th>RMS [{u.symbol}]</th>"
                  f"<th>asymmetric loss [({u.symbol})^2]</th>"

@@ -120,6 +120,9 @@ def _common(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--loss", default="least_squares", choices=("least_squares", "asymmetric"))
     sp.add_argument("--w", type=float, default=10.0, help="over-estimation weight of the asymmetric loss")
     sp.add_argument("--folds", type=int, default=DEFAULT_FOLDS, help="held-out blocks (or the log's segments)")
+    sp.add_argument("--smooth-torque", type=float, default=None, metavar="S",
+                    help="window [s] of the torque's centred smoothing (0: none; default: chosen from the torque's "
+                         "noise by cross-validation)")
     sp.add_argument("--align-torque", type=float, default=0.0, metavar="S",
                     help="re-time the torque against the encoders, searching +/- S seconds (0: off)")
     sp.add_argument("--plugin", action="append", default=[], metavar="FILE.py",
@@ -202,6 +205,8 @@ def _check_options(args: argparse.Namespace) -> None:
         raise IdentificationError(f"--folds {args.folds}: expected 2 to {MAX_FOLDS}")
     if getattr(args, "max_steps", 1) < 1:
         raise IdentificationError(f"--max-steps {args.max_steps}: expected at least 1")
+    if args.smooth_torque is not None and not (math.isfinite(args.smooth_torque) and args.smooth_torque >= 0):
+        raise IdentificationError(f"--smooth-torque {args.smooth_torque}: expected a window >= 0 s (0: no smoothing)")
     if not (math.isfinite(args.align_torque) and args.align_torque >= 0):
         raise IdentificationError(f"--align-torque {args.align_torque}: expected a search range >= 0 s (0: off)")
     seen: dict[Path, str] = {}
@@ -232,7 +237,8 @@ def run(args: argparse.Namespace) -> int:
     from servotau.estimation.config import EstimatorConfig
 
     estimation = EstimatorConfig.from_toml(config_files(args, ESTIMATION).path(ESTIMATION.name))
-    ds = combine([load_dataset(p, joint=args.joint, roles=roles, estimator_config=estimation) for p in args.log])
+    read = {"joint": args.joint, "roles": roles, "estimator_config": estimation, "smooth_torque_s": args.smooth_torque}
+    ds = combine([load_dataset(p, **read) for p in args.log])
     if len(args.log) > 1 and args.folds == DEFAULT_FOLDS:
         args.folds = len(args.log)
     if dead_band and ds.joint is None:
@@ -320,18 +326,19 @@ def run(args: argparse.Namespace) -> int:
                 d = MotorParameters.load_toml(path)[joint].extra["deadzone"].coefficient
                 out["saved"]["dead_band"] = d
                 say(f"deadzone: d = {1e3 * d:.3f} mrad on the holds of {args.log[0]}")
+    test_row = None  # (label, metrics) of the recordings scored but not fitted on
     if args.test:
         final = (ladder.final if ladder is not None
                  else comparison.model if comparison is not None else diagnosis.base.model)
-        test = combine([load_dataset(p, joint=args.joint, roles=roles, estimator_config=estimation)
-                        for p in args.test])
+        test = combine([load_dataset(p, **read) for p in args.test])
         _has_signals(final, test, f"the model fitted on {ds.source}")
         tested = compare(test, final, loss)
         out["test"] = {"source": test.source, "n": test.n, "model": final.spec.label(),
                        **_clean(tested.train.to_dict())}
         say(f"scored on {test.source} (not fitted on it)")
+        test_row = (f"{final.spec.label()} (test: {test.source}, not fitted on it)", tested.train)
     if args.report:
-        page = _report(args.report, ds, comparison, diagnosis, ladder, out, unit)
+        page = _report(args.report, ds, comparison, diagnosis, ladder, out, unit, test_row)
         out["report"] = str(page)
         say(f"report: {page}")
     if args.rerun:
@@ -391,11 +398,11 @@ def _clean(x):
     return x
 
 
-def _report(out_dir, ds, comparison, diagnosis, ladder, summary, unit):
+def _report(out_dir, ds, comparison, diagnosis, ladder, summary, unit, test_row=None):
     from servotau.identification.workbench.report import write_report
 
     return write_report(out_dir, ds, comparison=comparison, diagnosis=diagnosis, ladder=ladder, summary=summary,
-                        unit=unit)
+                        unit=unit, test=test_row)
 
 
 def _rerun(target: str, ds, comparison, diagnosis, ladder, unit) -> None:
