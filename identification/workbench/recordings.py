@@ -46,8 +46,8 @@ def combine(datasets: Sequence[Dataset]) -> Dataset:
                                       f"{dict(first.roles)}: expected recordings of the same layout")
         if (d.dt is None) != (first.dt is None) or (
                 d.dt is not None and abs(d.dt - first.dt) > DT_TOLERANCE * first.dt):
-            raise IdentificationError(f"{d.source}: sample period {d.dt} s differs from {first.source}'s {first.dt} s: "
-                                      "expected recordings at the same rate")
+            raise IdentificationError(f"{d.source}: sample period {_period(d.dt)} differs from {first.source}'s "
+                                      f"{_period(first.dt)}: expected recordings at the same rate")
     names = [k for k in first.signals if all(k in d.signals for d in datasets)]
     cols = {}
     for k in names:
@@ -106,3 +106,7 @@ def _preprocessing(datasets: Sequence[Dataset], offsets, notes: list[str]) -> di
             notes.append(f"{key}: each recording filtered with its own window: {windows_text(windows)} samples "
                          f"(recordings {windows_text(list(range(len(datasets))))})")
     return out
+
+
+def _period(dt: float | None) -> str:
+    return "unknown (no time column)" if dt is None else f"{1e3 * dt:.6g} ms"
