@@ -33,6 +33,7 @@ import time
 from contextlib import contextmanager
 
 import numpy as np
+import scipy.signal  # noqa: F401  (the filters import it on first use: a second of imports, not of the workbench)
 
 from servotau.experiments.plant_family import draw_plant, measure, simulate
 from servotau.identification.workbench import diagnose, effect_names, load_dataset, parse_spec
