@@ -90,6 +90,9 @@ def test_bad_input_names_the_column_and_the_expected_value(tmp_path):
     allnan = dict(cols, tau=np.full(len(cols["t"]), np.nan))
     with pytest.raises(IdentificationError, match="column 'tau' \\(role torque\\): all 2000 values are NaN"):
         load_dataset(allnan)
+    huge = dict(cols, tau=cols["tau"] * 1e200)  # a trial's file: "condition number inf" before this check
+    with pytest.raises(IdentificationError, match="column 'tau' \\(role torque\\): values up to .*e\\+2.*: expected"):
+        load_dataset(huge)
     with pytest.raises(IdentificationError, match="not found"):
         load_dataset(tmp_path / "missing.parquet")
     (tmp_path / "log.json").write_text("{}")

@@ -66,6 +66,7 @@ __all__ = ["MIN_SAMPLES", "OFFLINE_ESTIMATE", "TORQUE_COLUMN", "Dataset", "Filte
 log = logging.getLogger(__name__)
 OFFLINE_ESTIMATE = "off-line estimates from the log's sensors"  # in the note of a log estimated here (layout 2)
 MIN_SAMPLES = 200
+MAX_MAGNITUDE = 1e100  # a larger value overflows in the products of the fits (1e200 squared); no unit gives it
 PERIOD_JUMPS = 0.05  # fraction of long time steps beyond which the period jumps (the log is resampled)
 TORQUE_COLUMN = re.compile(r"tau|torque|friction|effort|trq", re.IGNORECASE)
 """A target column whose name matches holds a torque or friction [N m]; any other target's unit is the user's."""
@@ -210,6 +211,10 @@ def load_dataset(
         if bad.all():
             raise IdentificationError(f"column '{roles[role]}' (role {role}): all {n_total} values are NaN or inf")
         valid &= ~bad
+        peak = float(np.max(np.abs(arr[~bad])))
+        if peak > MAX_MAGNITUDE:  # their squares, in every fit's cross products, overflow
+            raise IdentificationError(f"column '{roles[role]}' (role {role}): values up to {peak:.3g}: expected "
+                                      f"magnitudes below {MAX_MAGNITUDE:.0e} (the units of the column?)")
     n_dropped = int(n_total - valid.sum())
     if n_dropped:
         notes.append(f"dropped {n_dropped} of {n_total} rows with NaN or inf in "
