@@ -90,6 +90,9 @@ def test_bad_input_names_the_column_and_the_expected_value(tmp_path):
     allnan = dict(cols, tau=np.full(len(cols["t"]), np.nan))
     with pytest.raises(IdentificationError, match="column 'tau' \\(role torque\\): all 2000 values are NaN"):
         load_dataset(allnan)
+    for window in (-0.01, float("nan")):  # a negative window ran as 5 samples; NaN raised a ValueError
+        with pytest.raises(IdentificationError, match="smooth_torque_s = .*: expected a window >= 0 s"):
+            load_dataset(cols, smooth_torque_s=window)
     huge = dict(cols, tau=cols["tau"] * 1e200)  # a trial's file: "condition number inf" before this check
     with pytest.raises(IdentificationError, match="column 'tau' \\(role torque\\): values up to .*e\\+2.*: expected"):
         load_dataset(huge)

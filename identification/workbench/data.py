@@ -44,6 +44,7 @@ over 50 rad/s, a sample period over 0.5 s) are noted; the diagnosis then cannot 
 from __future__ import annotations
 
 import logging
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -181,9 +182,11 @@ def load_dataset(
 
     Raises:
         IdentificationError: Missing or unknown column, unknown joint, too few samples, time not
-            increasing, or velocity needed but no time column: the message names the column and what
-            was expected.
+            increasing, velocity needed but no time column, or ``smooth_torque_s`` not >= 0: the message names
+            the column (or argument) and what was expected.
     """
+    if smooth_torque_s is not None and not (math.isfinite(smooth_torque_s) and smooth_torque_s >= 0):
+        raise IdentificationError(f"smooth_torque_s = {smooth_torque_s!r}: expected a window >= 0 s (0: no smoothing)")
     if isinstance(source, (str, Path)):
         columns = read_table(source)
         name = str(source)
